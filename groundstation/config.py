@@ -1,0 +1,552 @@
+"""Configuration: pydantic models for every part of the ground station.
+
+A configuration is one YAML file (``config/lab.yaml`` for the real lab,
+``config/sim.yaml`` for the virtual lab). :func:`load_config` reads and
+validates it; any problem raises :class:`~groundstation.errors.ConfigError`
+whose message names the field path, the offending value and the reason, one
+line per problem. Unknown keys are errors (a typo must not silently fall back
+to a default).
+
+Every numeric default names its source in a comment: a thesis equation or
+table ("eq. 3.7", "Table 6.2"), the spec, or the reason it was chosen where the
+thesis is silent (see the errata in ``shared/DESIGN.md``).
+
+Single fields can be overridden (the ``gs fly --serial-port ...`` options) with
+:func:`apply_overrides`, which re-validates the whole model so an override is
+checked exactly like the file.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+import yaml
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from groundstation.errors import ConfigError
+
+CHANNELS = ("pitch", "roll", "yaw", "thrust")
+"""Channel names, in the spec's ctrl-mask bit order (bit0 pitch ... bit3 thrust)."""
+
+SENSOR_BLOCKS = ("status", "gyro", "acc", "pressure", "rc")
+"""DATA block names, in the spec's mask bit order (bit0 status ... bit4 rc)."""
+
+Channel = Literal["pitch", "roll", "yaw", "thrust"]
+SensorBlock = Literal["status", "gyro", "acc", "pressure", "rc"]
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+PositiveFloat = Annotated[float, Field(gt=0)]
+NonNegFloat = Annotated[float, Field(ge=0)]
+
+
+class _Model(BaseModel):
+    """Base: unknown keys are errors, instances are immutable."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+
+def _matrix(value: list[float] | list[list[float]], n: int, name: str) -> np.ndarray:
+    """A covariance given as a diagonal (list) or a full matrix (list of lists) -> (n, n)."""
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 1:
+        if arr.shape != (n,):
+            raise ValueError(f"{name} diagonal must have {n} entries, found {arr.shape[0]}")
+        arr = np.diag(arr)
+    if arr.shape != (n, n):
+        raise ValueError(f"{name} must be {n}x{n}, found {arr.shape[0]}x{arr.shape[1]}")
+    return arr
+
+
+def _check_covariance(value: list[float] | list[list[float]], n: int, name: str) -> None:
+    """Raise ValueError unless ``value`` is a symmetric positive-definite n x n covariance."""
+    arr = _matrix(value, n, name)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} has non-finite entries")
+    if not np.allclose(arr, arr.T, rtol=1e-9, atol=1e-15):
+        raise ValueError(f"{name} is not symmetric")
+    try:
+        np.linalg.cholesky(arr)
+    except np.linalg.LinAlgError:
+        raise ValueError(f"{name} is not positive definite") from None
+
+
+Covariance = list[float] | list[list[float]]
+
+
+def _default_sensors() -> list[SensorBlock]:
+    return ["status", "gyro", "acc", "rc"]
+
+
+def _all_channels() -> list[Channel]:
+    return ["pitch", "roll", "yaw", "thrust"]
+
+
+# --------------------------------------------------------------------------- serial link
+class SerialConfig(_Model):
+    """The serial link to the X-3D (``spec/x3d-serial-protocol.md``)."""
+
+    port: str = "/dev/ttyUSB0"  # the lab's XBee adapter; a pty path or pyserial URL also works
+    baud: int = Field(57600, gt=0)  # spec section 1 default (design choice)
+    crc_profile: Literal["asctec", "kermit", "mcrf4xx"] = "asctec"  # spec section 2
+    sensors: list[SensorBlock] = Field(default_factory=_default_sensors)  # STATUS+GYRO+ACC+RC = 41 B/frame, 71% of 57600 baud at 100 Hz (spec section 6)
+    data_period_ms: int = Field(10, ge=1, le=1000)  # 100 Hz IMU, thesis Ch. 1.2.2
+    command_rate_hz: float = Field(50.0, ge=20.0, le=100.0)
+    # 50 Hz: spec section 4 target 50-100 Hz; thesis flew 33 Hz over XBee (App. A.3).
+    # >= 20 Hz so a command period never exceeds half the 100 ms watchdog.
+    stale_command_s: float = Field(0.25, gt=0, le=1.0)
+    # keep-alive resends the loop's last command only this long, then hands back (mask 0)
+    handover_blend_s: NonNegFloat = 1.0  # bumpless-transfer blend time; thesis silent
+
+    @field_validator("sensors")
+    @classmethod
+    def _needs_imu(cls, value: list[str]) -> list[str]:
+        if len(set(value)) != len(value):
+            raise ValueError("sensor blocks listed twice")
+        if "gyro" not in value or "acc" not in value:
+            raise ValueError("the estimator needs the 'gyro' and 'acc' blocks")
+        return value
+
+    @property
+    def sensor_mask(self) -> int:
+        """DATA mask bits for :attr:`sensors` (spec section 3.3)."""
+        return sum(1 << SENSOR_BLOCKS.index(name) for name in self.sensors)
+
+
+class ChannelsConfig(_Model):
+    """Which channels the ground station controls (the rest stay with the RC pilot)."""
+
+    auto: list[Channel] = Field(default_factory=_all_channels)
+
+    @field_validator("auto")
+    @classmethod
+    def _unique(cls, value: list[str]) -> list[str]:
+        if len(set(value)) != len(value):
+            raise ValueError("channel listed twice")
+        return value
+
+
+# --------------------------------------------------------------------------- Vicon
+class RotationConfig(_Model):
+    """A fixed rotation given as intrinsic X-Y-Z Euler angles in degrees."""
+
+    euler_xyz_deg: Vec3 = Field(default_factory=lambda: [180.0, 0.0, 0.0])
+
+    def as_matrix(self) -> np.ndarray:
+        """(3, 3) rotation matrix Rx(a) @ Ry(b) @ Rz(c)."""
+        from scipy.spatial.transform import Rotation
+
+        return np.asarray(Rotation.from_euler("XYZ", self.euler_xyz_deg, degrees=True).as_matrix())
+
+
+class ViconConfig(_Model):
+    """The Vicon UDP object stream (``spec/vicon-udp.md``)."""
+
+    bind_address: str = "0.0.0.0"
+    port: int = Field(51001, ge=1, le=65535)  # Tracker's conventional UDP object-stream port
+    object_name: str = Field("X3D", min_length=1, max_length=23)  # spec: at most 23 characters
+    world_to_ned: RotationConfig = RotationConfig()  # Vicon z-up -> NED: 180 deg about x (spec)
+    body_to_object: RotationConfig = RotationConfig()  # FRD body -> object frame: 180 deg about x
+    latency_s: NonNegFloat = 0.005  # spec: "a few ms"; Tracker + network latency
+    expected_rate_hz: PositiveFloat = 100.0  # thesis lab streamed 100 Hz (App. B)
+    min_rate_hz: PositiveFloat = 8.0  # warn below: the thesis flew at 10 Hz (Ch. 11.1)
+    max_speed_m_s: PositiveFloat = 5.0  # outlier gate; spec "a few m/s"
+    max_rotation_rate_rad_s: PositiveFloat = 30.0  # outlier gate; spec "tens of rad/s"
+    restart_silence_s: PositiveFloat = 1.0  # a longer silence is a Tracker restart (spec)
+    restart_backjump_frames: int = Field(1000, gt=0)  # a larger backward jump is a restart
+
+    @model_validator(mode="after")
+    def _rates(self) -> ViconConfig:
+        if self.min_rate_hz > self.expected_rate_hz:
+            raise ValueError("min_rate_hz must not exceed expected_rate_hz")
+        return self
+
+
+# --------------------------------------------------------------------------- vehicle
+class VehicleConfig(_Model):
+    """The X-3D model parameters (thesis Ch. 3 and 6)."""
+
+    mass_kg: PositiveFloat = 0.60
+    # not printed in the thesis: 0.60 kg makes the eq. 3.7 polynomial hover near mid-stick
+    # (F_lift(2000) = -5.93 N = -0.603 kg * 9.82), DESIGN.md errata
+    gravity: PositiveFloat = 9.82  # thesis eq. 3.8, Denmark
+    k_rate: Vec3 = Field(default_factory=lambda: [1.1e-3, 1.1e-3, 1.1e-3])
+    # [K_phi, K_theta, K_psi] rad/s per stick unit: max roll step 2047 gave 2.25 rad/s
+    # (Ch. 3.3.1), identified values not printed (DESIGN.md errata); yaw assumed the same
+    thrust_poly: list[float] = Field(
+        default_factory=lambda: [2.073e-10, -1.143e-6, -1.054e-3, -0.903], min_length=2
+    )  # eq. 3.7, [a3, a2, a1, a0], body-z force [N] (negative = up); App. C.1's a2 is a typo
+    induced_inflow: float = Field(-0.423, lt=0)  # I_i, eq. 3.9 and eq. C.8 [N s/m]
+    gyro_scale: Vec3 = Field(default_factory=lambda: [0.0144, 0.0143, 0.0127])
+    # Table 6.2 K_gyro [rad/s per count]
+    acc_scale: Vec3 = Field(default_factory=lambda: [0.0086, 0.0077, 0.0111])
+    # Table 6.2 K_acc [m/s^2 per count]
+    gyro_zero: Vec3 = Field(default_factory=lambda: [2048.0, 2048.0, 2048.0])
+    # spec section 3.3: 12-bit counts, zero at mid-range (calibrate per vehicle)
+    acc_zero: Vec3 = Field(default_factory=lambda: [2048.0, 2048.0, 2048.0])  # as gyro_zero
+    gyro_variance: Vec3 = Field(default_factory=lambda: [1.24e-4, 1.94e-4, 8.54e-4])
+    # Table 6.3 [(rad/s)^2]
+    acc_variance: Vec3 = Field(default_factory=lambda: [4.60e-3, 2.62e-3, 3.54e-3])
+    # Table 6.3 [(m/s^2)^2]
+    vicon_position_variance: Vec3 = Field(default_factory=lambda: [4.16e-7, 3.28e-9, 2.91e-7])
+    # Table 6.1 [m^2]
+    vicon_quaternion_variance: list[float] = Field(
+        default_factory=lambda: [1.09e-9, 5.17e-6, 9.74e-6, 3.62e-6], min_length=4, max_length=4
+    )  # Table 6.1, q0..q3
+    acc_saturation: PositiveFloat = 14.0  # Ch. 6.2: accelerometer saturates near 14 m/s^2
+
+    @field_validator("k_rate", "gyro_scale", "acc_scale")
+    @classmethod
+    def _nonzero(cls, value: list[float]) -> list[float]:
+        if any(v == 0.0 or not math.isfinite(v) for v in value):
+            raise ValueError("every entry must be finite and non-zero")
+        return value
+
+    @field_validator(
+        "gyro_variance", "acc_variance", "vicon_position_variance", "vicon_quaternion_variance"
+    )
+    @classmethod
+    def _positive(cls, value: list[float]) -> list[float]:
+        if any(not v > 0 for v in value):
+            raise ValueError("variances must be positive")
+        return value
+
+    @model_validator(mode="after")
+    def _can_hover(self) -> VehicleConfig:
+        max_lift = -min(float(np.polyval(self.thrust_poly, u)) for u in range(0, 4097, 64))
+        if max_lift <= self.mass_kg * self.gravity:
+            raise ValueError(
+                f"thrust_poly lifts at most {max_lift:.2f} N, less than the weight "
+                f"{self.mass_kg * self.gravity:.2f} N: the vehicle could not hover"
+            )
+        return self
+
+
+# --------------------------------------------------------------------------- estimator
+class EstimatorConfig(_Model):
+    """The IMU-driven EKF (thesis Ch. 7). Sensor variances come from the vehicle section."""
+
+    gyro_bias_walk: PositiveFloat = 1e-6
+    # gyro bias random walk [(rad/s)^2/s]: tuned (thesis: Q "determined by manual tuning")
+    acc_bias_walk: PositiveFloat = 1e-4  # accelerometer bias random walk [(m/s^2)^2/s], tuned
+    process_noise_scale: PositiveFloat = 1.0
+    # multiplies the Table 6.3 IMU variances used as process noise (1 = as measured)
+    r_override: Covariance | None = None
+    # optional 7x7 (or diagonal 7) Vicon R replacing Table 6.1 [m^2, -]
+    initial_covariance: Covariance = Field(
+        default_factory=lambda: [1e-4] * 3 + [1e-4] * 4 + [1e-2] * 3 + [1e-3] * 3 + [1e-1] * 3
+    )  # 16 diagonal: P, q, v, gyro bias, acc bias; loose enough for biases to settle in ~3 s
+    gate_probability: float = Field(0.9999, gt=0.5, lt=1.0)
+    # chi-square innovation gate; 1e-4 false-reject rate per update
+    ignore_variance: PositiveFloat = 1e8  # Algorithms 1 and 2: R entry for ignored samples
+    divergence_trace: PositiveFloat = 10.0
+    # covariance trace above which the estimate is declared diverged (failsafe)
+    max_vicon_delay_s: PositiveFloat = 0.2  # older poses are dropped instead of re-propagated
+    settle_time_s: PositiveFloat = 3.0  # on the ground before take-off, thesis Ch. 7.4 (~3 s)
+
+    @field_validator("r_override")
+    @classmethod
+    def _r_pd(cls, value: Covariance | None) -> Covariance | None:
+        if value is not None:
+            _check_covariance(value, 7, "r_override")
+        return value
+
+    @field_validator("initial_covariance")
+    @classmethod
+    def _p0_pd(cls, value: Covariance) -> Covariance:
+        _check_covariance(value, 16, "initial_covariance")
+        return value
+
+
+# --------------------------------------------------------------------------- controller
+class LqrConfig(_Model):
+    """LQR with a reference model (thesis Ch. 9). Weights on the error e = r - y."""
+
+    q_error: Covariance = Field(default_factory=lambda: [8.0, 8.0, 20.0, 2.0])
+    # Q_e on [x, y, z, q3] errors (eq. 9.18); tuned for ~0.2 Hz x/y bandwidth as Ch. 11.2
+    r_input: Covariance = Field(default_factory=lambda: [4e6, 4e6, 2.0, 4e6])
+    # R on [u_phi, u_theta, F_z, u_psi] (eq. 4.31; stick units and N), tuned
+    q_integral: Covariance | None = Field(default_factory=lambda: [0.5, 0.5, 2.0, 0.0])
+    # weights on the integrated [x, y, z, q3] errors; beyond the thesis: zero steady-state
+    # error under thrust/mass/bias disturbances (issue 7). None disables integral action.
+    integral_limit: PositiveFloat = 0.5  # anti-windup clamp on each integrated error [m s]
+    velocity_filter: float = Field(0.5, ge=0.0, lt=1.0)
+    # constant-velocity reference model: weight of the previous reference velocity
+    # when estimating it from samples (eq. 9.22-9.26 filter), tuned
+
+    @field_validator("q_error", "r_input")
+    @classmethod
+    def _pd4(cls, value: Covariance) -> Covariance:
+        _check_covariance(value, 4, "weight")
+        return value
+
+
+class PidConfig(_Model):
+    """Cascaded position/velocity/attitude PID (thesis Ch. 8 baseline)."""
+
+    position_kp: Vec3 = Field(default_factory=lambda: [0.8, 0.8, 1.2])  # [1/s], tuned
+    velocity_kp: Vec3 = Field(default_factory=lambda: [0.25, 0.25, 4.0])
+    # x/y: rad tilt per m/s; z: N per m/s; tuned
+    velocity_ki: Vec3 = Field(default_factory=lambda: [0.05, 0.05, 1.5])  # tuned
+    velocity_kd: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])  # tuned
+    attitude_kp: Vec3 = Field(default_factory=lambda: [4.0, 4.0, 2.0])
+    # rate set point per rad of attitude error [1/s], tuned
+    max_tilt_deg: PositiveFloat = 20.0  # tilt command limit, tuned
+
+
+class HinfConfig(_Model):
+    """H-infinity controller (thesis Ch. 10): the loop uses a stored gain."""
+
+    gain_file: Path | None = None  # written by `gs synth hinf`; required when type is hinf
+    include_rate_loop: bool = True  # design on the model with the rate-loop lag (Ch. 10.3)
+    epsilon: PositiveFloat = 0.1  # D12 input weight (eq. 10.5), tuned
+    reference_pole: PositiveFloat = 1.0  # a_i of W_r (eq. 10.10) [rad/s], tuned
+    noise_gain: PositiveFloat = 0.01  # k of W_n (eq. 10.9), tuned
+
+
+class ControllerConfig(_Model):
+    """Which controller flies and how it is tuned."""
+
+    type: Literal["lqr-cv", "lqr-cp", "pid", "hinf"] = "lqr-cv"
+    # lqr-cv: constant-velocity reference model (the thesis's best, Ch. 11.3)
+    rate_hz: float = Field(100.0, ge=10.0, le=200.0)  # one step per DATA sample (100 Hz)
+    lqr: LqrConfig = LqrConfig()
+    pid: PidConfig = PidConfig()
+    hinf: HinfConfig = HinfConfig()
+
+    @model_validator(mode="after")
+    def _hinf_gain(self) -> ControllerConfig:
+        if self.type == "hinf" and self.hinf.gain_file is None:
+            raise ValueError("controller type 'hinf' needs hinf.gain_file (see `gs synth hinf`)")
+        return self
+
+
+# --------------------------------------------------------------------------- trajectory
+TrajectoryName = Literal[
+    "hover", "step-x", "step-y", "step-z", "square", "yz-rectangle", "low-hover",
+    "figure-eight", "waypoints",
+]
+
+
+class TrajectoryConfig(_Model):
+    """The trajectory flown after take-off (thesis Ch. 11)."""
+
+    name: TrajectoryName = "square"
+    center: Vec3 = Field(default_factory=lambda: [0.0, 0.0, -1.0])
+    # hover point / square centre, NED [m]: 1 m above the floor as Ch. 11.1 and 11.3
+    size_m: PositiveFloat = 0.75  # square side, Ch. 11.3 (0.75 m x 0.75 m)
+    period_s: PositiveFloat = 20.0  # one lap, Ch. 11.3
+    step_m: PositiveFloat = 0.5  # step amplitude for step-x/y/z, tuned to stay in the volume
+    low_height_m: PositiveFloat = 0.02  # low-hover height, Ch. 11.4 (2 cm)
+    corner_smoothing_s: NonNegFloat = 0.0  # 0 = sharp corners as in the thesis
+    file: Path | None = None  # CSV of waypoints (t, x, y, z[, yaw]) for name 'waypoints'
+
+    @model_validator(mode="after")
+    def _file(self) -> TrajectoryConfig:
+        if self.name == "waypoints" and self.file is None:
+            raise ValueError("trajectory 'waypoints' needs 'file'")
+        return self
+
+
+# --------------------------------------------------------------------------- safety
+class SafetyConfig(_Model):
+    """Limits and failsafe times the supervisor enforces."""
+
+    volume_x: tuple[float, float] = (-1.5, 1.5)  # Table B.1 tracked volume [m]
+    volume_y: tuple[float, float] = (-1.5, 1.5)  # Table B.1
+    volume_z: tuple[float, float] = (-2.0, 0.05)  # Table B.1 height 0..2 m, NED (z up is -)
+    max_tilt_deg: PositiveFloat = 35.0  # beyond this Vicon tracking is unreliable; tuned
+    vicon_loss_hold_s: PositiveFloat = 0.5  # hold on the IMU estimate after this (PX4 figure)
+    vicon_loss_land_s: PositiveFloat = 2.0  # land if Vicon has not returned after this
+    link_loss_s: PositiveFloat = 0.3  # no DATA this long = link lost
+    takeoff_height_m: PositiveFloat = 1.0  # Ch. 11: flights at 1 m
+    takeoff_speed_m_s: PositiveFloat = 0.5  # climb rate for take-off, tuned
+    land_speed_m_s: PositiveFloat = 0.3  # descent rate when landing, tuned
+    preflight_timeout_s: PositiveFloat = 10.0  # give up if checks do not pass in this time
+    gravity_check_deg: PositiveFloat = 10.0  # accel gravity vs Vicon attitude agreement
+    on_signal: Literal["land", "handback"] = "land"  # what SIGINT/SIGTERM does
+
+    @field_validator("volume_x", "volume_y", "volume_z")
+    @classmethod
+    def _ordered(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if not value[0] < value[1]:
+            raise ValueError("volume bounds must be (min, max) with min < max")
+        return value
+
+    @model_validator(mode="after")
+    def _order(self) -> SafetyConfig:
+        if self.vicon_loss_land_s < self.vicon_loss_hold_s:
+            raise ValueError("vicon_loss_land_s must not be shorter than vicon_loss_hold_s")
+        return self
+
+
+# --------------------------------------------------------------------------- telemetry, logging
+class TelemetryConfig(_Model):
+    """The pyzmq PUB socket."""
+
+    enabled: bool = True
+    endpoint: str = "tcp://127.0.0.1:5556"  # loopback by default; bind to * to serve the lab
+    rate_hz: float = Field(20.0, gt=0, le=100.0)  # enough for a live view, light on the loop
+
+
+class LoggingConfig(_Model):
+    """Console/JSON logging and the flight recorder."""
+
+    level: Literal["debug", "info", "warning", "error"] = "info"
+    format: Literal["auto", "console", "json"] = "auto"  # auto: console on a TTY, else JSON
+    flight_log_dir: Path = Path("flightlogs")
+
+
+# --------------------------------------------------------------------------- virtual lab
+class SimFaultsConfig(_Model):
+    """Fault injection in the virtual X-3D link, all off by default."""
+
+    corruption_rate: float = Field(0.0, ge=0.0, le=1.0)  # probability per byte of a bit flip
+    drop_rate: float = Field(0.0, ge=0.0, le=1.0)  # probability per DATA frame of dropping it
+    stall_at_s: NonNegFloat | None = None  # DATA stream stalls at this simulated time
+    stall_duration_s: NonNegFloat = 0.0
+    burst_delay_s: NonNegFloat = 0.0  # hold DATA and deliver it in bursts of this length
+
+
+class SimViconConfig(_Model):
+    """The virtual Vicon sender."""
+
+    target_address: str = "127.0.0.1"  # loopback: never send outside this machine
+    rate_hz: PositiveFloat = 100.0  # thesis lab 100 Hz; Ch. 11.1 also flew 10 and 1 Hz
+    latency_s: NonNegFloat = 0.005  # matches vicon.latency_s default
+    noise: bool = True  # Table 6.1 variances from the vehicle section
+    loss_encoding: Literal["missing", "zero", "held-identity"] = "held-identity"
+    # spec "lost tracking" encodings; held-identity is the thesis lab's (Alg. 2)
+    outages: list[tuple[float, float]] = Field(default_factory=list)  # (start_s, duration_s)
+    tilt_limit_deg: PositiveFloat = 60.0  # tracking lost beyond this tilt; markers occluded
+    pad_to: int | None = Field(1024, ge=80)  # Tracker's data block size (spec)
+
+
+class SimConfig(_Model):
+    """The virtual lab (sim_device/): plant, sensors, link and Vicon."""
+
+    seed: int = 1
+    dt_s: float = Field(0.002, gt=0, le=0.01)  # 2 ms fixed step, issue 5 (rate loop, motors)
+    rate_loop_tau_s: NonNegFloat = 0.064
+    # first-order rate loop: 10-90 % rise 2.2 tau = 0.14 s (Fig. 3.8); 0 disables
+    command_delay_s: NonNegFloat = 0.02  # transport delay of the command link (Ch. 3.3.1)
+    battery_droop: float = Field(0.03, ge=0.0, lt=0.5)
+    # lift loss fraction over battery_droop_time_s (Ch. 5.2 observed a growing offset)
+    battery_droop_time_s: PositiveFloat = 300.0
+    thrust_scale: PositiveFloat = 1.0  # true lift / polynomial lift; 0.9 = 10 % thrust error
+    gyro_bias: Vec3 = Field(default_factory=lambda: [0.01, -0.02, 0.005])  # rad/s, plausible
+    acc_bias: Vec3 = Field(default_factory=lambda: [0.05, -0.05, 0.1])  # m/s^2, plausible
+    scale_error: NonNegFloat = 0.02  # max per-axis IMU scale error fraction ("a few %")
+    initial_position: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])  # on the floor
+    initial_yaw_deg: float = 0.0
+    pilot_thrust: int = Field(0, ge=0, le=4096)
+    # scripted pilot's thrust stick when it has the vehicle (0 = motors idle on the ground)
+    serial_enable: bool = True  # the RC serial-enable switch
+    rc_link: bool = True
+    battery_mv: int = Field(11800, ge=0)  # reported in STATUS (3S LiPo, spec worked frame)
+    truth_file: Path | None = None  # ground truth written here on exit
+    faults: SimFaultsConfig = SimFaultsConfig()
+    vicon: SimViconConfig = SimViconConfig()
+
+
+# --------------------------------------------------------------------------- top level
+class GroundStationConfig(_Model):
+    """The whole configuration file."""
+
+    serial: SerialConfig = SerialConfig()
+    channels: ChannelsConfig = ChannelsConfig()
+    vicon: ViconConfig = ViconConfig()
+    vehicle: VehicleConfig = VehicleConfig()
+    estimator: EstimatorConfig = EstimatorConfig()
+    controller: ControllerConfig = ControllerConfig()
+    trajectory: TrajectoryConfig = TrajectoryConfig()
+    safety: SafetyConfig = SafetyConfig()
+    telemetry: TelemetryConfig = TelemetryConfig()
+    logging: LoggingConfig = LoggingConfig()
+    sim: SimConfig | None = None  # present only in the virtual lab's configuration
+
+
+# --------------------------------------------------------------------------- loading
+def _problems(exc: ValidationError) -> list[tuple[str, object, str]]:
+    """One (field path, value, reason) per pydantic error."""
+    out = []
+    for err in exc.errors(include_url=False):
+        path = ".".join(str(p) for p in err["loc"]) or "<root>"
+        reason = err["msg"]
+        if err["type"] == "extra_forbidden":
+            reason = "unknown key"
+        elif err["type"] == "missing":
+            reason = "required field is missing"
+        out.append((path, err.get("input"), reason))
+    return out
+
+
+def _raise(problems: list[tuple[str, object, str]], source: str) -> None:
+    lines = [f"{source}: {len(problems)} configuration error(s)"]
+    lines += [f"  {path}: {value!r}: {reason}" for path, value, reason in problems]
+    raise ConfigError("\n".join(lines), problems)
+
+
+def validate_config(data: dict[str, Any], source: str = "<config>") -> GroundStationConfig:
+    """Validate a parsed mapping; raise ConfigError naming every bad field."""
+    if not isinstance(data, dict):
+        _raise([("<root>", data, "the file must hold a mapping of sections")], source)
+    try:
+        return GroundStationConfig.model_validate(data)
+    except ValidationError as exc:
+        _raise(_problems(exc), source)
+        raise AssertionError("unreachable") from exc
+
+
+def load_config(path: str | Path) -> GroundStationConfig:
+    """Read and validate a YAML configuration file.
+
+    Raises ConfigError if the file is missing, is not YAML, or fails validation.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+    return validate_config(data if data is not None else {}, str(path))
+
+
+def apply_overrides(
+    config: GroundStationConfig, overrides: dict[str, Any]
+) -> GroundStationConfig:
+    """Return a copy with dotted-path fields replaced, re-validated as a whole.
+
+    ``apply_overrides(cfg, {"serial.port": "/dev/pts/3", "vicon.port": 51002})``.
+    ``None`` values are skipped (an option the user did not give). An unknown
+    path or an invalid value raises ConfigError naming the path.
+    """
+    data = config.model_dump(mode="json")
+    for dotted, value in overrides.items():
+        if value is None:
+            continue
+        node = data
+        *parents, leaf = dotted.split(".")
+        for key in parents:
+            if not isinstance(node.get(key), dict):
+                node[key] = {} if node.get(key) is None else node[key]
+            node = node[key]
+        node[leaf] = copy.deepcopy(value)
+    return validate_config(data, "override")
+
+
+def dump_config(config: GroundStationConfig) -> str:
+    """The validated configuration as YAML (what `gs check-config` prints)."""
+    return yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False)
