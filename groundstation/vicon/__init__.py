@@ -1,0 +1,51 @@
+"""Vicon Tracker UDP object stream: sans-IO decoder, frame conversion, filter, client.
+
+Data flow (``shared/DESIGN.md``)::
+
+    UDP datagram -> decoder.decode_datagram -> ObjectPose (mm, Euler XYZ)
+        -> PoseFilter (frame numbers, lost tracking, outlier gate, health)
+        -> frames.vicon_to_ned -> groundstation.types.Pose (NED m, q scalar first)
+
+Only :class:`ViconClient` touches a socket; everything else is pure and testable
+with bytes. The byte layout is ``shared/spec/vicon-udp.md``; the frame
+conventions are in :mod:`groundstation.vicon.frames`.
+"""
+
+from groundstation.vicon.client import DEFAULT_PORT, ViconClient
+from groundstation.vicon.decoder import (
+    BadDatagram,
+    DatagramDecoder,
+    ObjectPose,
+    ViconFrame,
+    decode_datagram,
+    encode_datagram,
+)
+from groundstation.vicon.frames import (
+    DEFAULT_BODY_TO_OBJECT,
+    DEFAULT_WORLD_TO_NED,
+    FrameConversion,
+    ned_to_vicon,
+    vicon_to_ned,
+)
+from groundstation.vicon.health import RateMonitor, ViconHealth
+from groundstation.vicon.posefilter import FilterOptions, PoseFilter
+
+__all__ = [
+    "DEFAULT_BODY_TO_OBJECT",
+    "DEFAULT_PORT",
+    "DEFAULT_WORLD_TO_NED",
+    "BadDatagram",
+    "DatagramDecoder",
+    "FilterOptions",
+    "FrameConversion",
+    "ObjectPose",
+    "PoseFilter",
+    "RateMonitor",
+    "ViconClient",
+    "ViconFrame",
+    "ViconHealth",
+    "decode_datagram",
+    "encode_datagram",
+    "ned_to_vicon",
+    "vicon_to_ned",
+]

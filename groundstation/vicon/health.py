@@ -1,0 +1,160 @@
+"""Health of the Vicon input: measured pose rate, counters, rate-band warnings.
+
+The Vicon rate is measured, never assumed: the lab must fly anywhere from 10 to
+100 Hz and degrade, with a warning, down to 1 Hz (``spec/vicon-udp.md``).
+:class:`RateMonitor` counts accepted poses in a sliding window and logs a
+structlog warning when the rate leaves the configured band, at most once per
+``warn_interval_s``. Sans-IO: every method takes the current monotonic time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import structlog
+
+from groundstation.errors import ConfigError
+
+LOGGER_NAME = "groundstation.vicon"
+
+
+@dataclass(frozen=True, slots=True)
+class ViconHealth:
+    """A snapshot of the Vicon input's health (all counters since construction).
+
+    rate_hz : accepted poses per second over the last rate window [Hz]
+    rate_in_band : rate_hz within [min_rate_hz, max_rate_hz] (True during the
+        first window, before the rate can be measured)
+    time_since_pose_s : now minus the receive time of the last accepted pose [s]
+        (inf if none yet)
+    datagrams : datagrams processed
+    poses : poses accepted and returned
+    rejected : per-reason count of datagrams rejected whole by the decoder
+    skipped_items : items skipped (unknown id, or object size != 72)
+    frames_dropped : frames missing from forward gaps in the frame number
+    duplicates : datagrams repeating the last frame number (dropped)
+    reordered : datagrams older than the last frame (dropped)
+    restarts : Tracker restarts detected (long silence or large backward jump)
+    lost_missing : datagrams without the configured object
+    lost_zero : object reported with all six values exactly 0
+    lost_held_identity : position held, rotations exactly (0, 0, 0)
+    non_finite : object values NaN or infinite
+    outliers : poses rejected by the speed / rotation-rate gate
+    reanchors : implausible poses accepted because the last good pose was too old
+    rate_warnings : rate-band warnings logged
+    """
+
+    rate_hz: float
+    rate_in_band: bool
+    time_since_pose_s: float
+    datagrams: int
+    poses: int
+    rejected: Mapping[str, int]
+    skipped_items: int
+    frames_dropped: int
+    duplicates: int
+    reordered: int
+    restarts: int
+    lost_missing: int
+    lost_zero: int
+    lost_held_identity: int
+    non_finite: int
+    outliers: int
+    reanchors: int
+    rate_warnings: int
+
+    @property
+    def rejected_datagrams(self) -> int:
+        """Total datagrams rejected whole by the decoder."""
+        return sum(self.rejected.values())
+
+
+class RateMonitor:
+    """Sliding-window rate of accepted poses with a rate-limited out-of-band warning.
+
+    window_s : sliding window length [s]; the rate is (poses in window) / window_s
+    min_rate_hz, max_rate_hz : the band outside which a warning is logged [Hz]
+    warn_interval_s : minimum time between two warnings [s]
+    logger : structlog logger (default ``structlog.get_logger("groundstation.vicon")``)
+    """
+
+    def __init__(
+        self,
+        *,
+        window_s: float = 1.0,
+        min_rate_hz: float = 8.0,
+        max_rate_hz: float = 120.0,
+        warn_interval_s: float = 5.0,
+        logger: structlog.typing.FilteringBoundLogger | None = None,
+    ) -> None:
+        if not window_s > 0.0 or not warn_interval_s >= 0.0:
+            raise ConfigError(
+                "rate window must be > 0 and warn interval >= 0",
+                [("rate_window_s", window_s, "> 0"), ("warn_interval_s", warn_interval_s, ">= 0")],
+            )
+        if not 0.0 <= min_rate_hz <= max_rate_hz:
+            raise ConfigError(
+                f"rate band [{min_rate_hz}, {max_rate_hz}] Hz is empty or negative",
+                [("min_rate_hz", min_rate_hz, "0 <= min <= max"), ("max_rate_hz", max_rate_hz, "")],
+            )
+        self.window_s = window_s
+        self.min_rate_hz = min_rate_hz
+        self.max_rate_hz = max_rate_hz
+        self.warn_interval_s = warn_interval_s
+        self._log = logger if logger is not None else structlog.get_logger(LOGGER_NAME)
+        self._times: deque[float] = deque()
+        self._t_first: float | None = None
+        self._t_last_pose = -math.inf
+        self._t_last_warning = -math.inf
+        self.in_band = True
+        self.warnings = 0
+
+    def record(self, t: float) -> None:
+        """Record one accepted pose received at monotonic time ``t`` [s]."""
+        if self._t_first is None:
+            self._t_first = t
+        self._times.append(t)
+        self._t_last_pose = t
+
+    def rate(self, now: float) -> float:
+        """Accepted poses per second over the window ending at ``now`` [Hz]."""
+        times = self._times
+        start = now - self.window_s
+        while times and times[0] <= start:
+            times.popleft()
+        return len(times) / self.window_s
+
+    def time_since_pose(self, now: float) -> float:
+        """``now`` minus the last recorded pose time [s] (inf if none)."""
+        return now - self._t_last_pose
+
+    def check(self, now: float) -> float:
+        """Update the band state at ``now``, warn if out of band; return the rate [Hz].
+
+        No verdict before one full window has passed since the first call.
+        """
+        if self._t_first is None:
+            self._t_first = now
+        rate = self.rate(now)
+        if now - self._t_first < self.window_s:
+            return rate
+        if self.min_rate_hz <= rate <= self.max_rate_hz:
+            if not self.in_band:
+                self._log.info("vicon_rate_recovered", rate_hz=rate)
+            self.in_band = True
+            return rate
+        self.in_band = False
+        if now - self._t_last_warning >= self.warn_interval_s:
+            self._t_last_warning = now
+            self.warnings += 1
+            self._log.warning(
+                "vicon_rate_out_of_band",
+                rate_hz=rate,
+                min_rate_hz=self.min_rate_hz,
+                max_rate_hz=self.max_rate_hz,
+                time_since_pose_s=self.time_since_pose(now),
+            )
+        return rate
