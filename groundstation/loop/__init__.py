@@ -1,0 +1,1 @@
+"""The flight loop: supervisor, flight core, real-time daemon, recorder."""

@@ -1,0 +1,161 @@
+"""Supervisor state machine: each transition and failsafe from scripted observations."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+
+from groundstation.loop.supervisor import (
+    Observation,
+    State,
+    Supervisor,
+    SupervisorLimits,
+)
+
+GOOD = Observation(
+    t=0.0, data_age_s=0.01, data_rate_hz=100.0, vicon_age_s=0.01, vicon_rate_hz=100.0,
+    estimator_ok=True, estimator_diverged=False, gravity_ok=True, position=(0.0, 0.0, 0.0),
+    tilt_rad=0.0, height_above_ground_m=0.0, takeoff_done=False, trajectory_done=False,
+    pilot_enabled=True, vehicle_applying=True,
+)
+
+
+def obs(t: float, **changes: object) -> Observation:
+    return dataclasses.replace(GOOD, t=t, **changes)  # type: ignore[arg-type]
+
+
+def airborne(sup: Supervisor) -> float:
+    """Drive a supervisor to TRACK; return the time reached."""
+    assert sup.update(obs(0.0)) is State.TAKEOFF
+    assert sup.update(obs(1.0, position=(0, 0, -0.5), height_above_ground_m=0.5)) is State.TAKEOFF
+    assert sup.update(obs(2.0, position=(0, 0, -1), height_above_ground_m=1.0,
+                          takeoff_done=True)) is State.TRACK
+    return 2.0
+
+
+FLYING_AT_1M = {"position": (0.0, 0.0, -1.0), "height_above_ground_m": 1.0}
+
+
+def test_nominal_flight_ends_done_and_logs_every_transition() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.commanding
+    assert sup.update(obs(t + 1, trajectory_done=True, **FLYING_AT_1M)) is State.LAND
+    # Still above the floor: keep landing.
+    assert sup.update(obs(t + 2, position=(0, 0, -0.3), height_above_ground_m=0.3)) is State.LAND
+    assert sup.update(obs(t + 3, position=(0, 0, -0.01), height_above_ground_m=0.01)) is State.LAND
+    assert sup.update(obs(t + 3.6, height_above_ground_m=0.01)) is State.DISARM
+    assert sup.update(obs(t + 4.2, height_above_ground_m=0.0)) is State.DONE
+    assert sup.terminal and sup.success and not sup.commanding
+    names = [(tr.old, tr.new) for tr in sup.transitions]
+    assert names == [(State.PREFLIGHT, State.TAKEOFF), (State.TAKEOFF, State.TRACK),
+                     (State.TRACK, State.LAND), (State.LAND, State.DISARM),
+                     (State.DISARM, State.DONE)]
+    assert all(tr.reason for tr in sup.transitions)
+
+
+@pytest.mark.parametrize(
+    ("change", "failure"),
+    [
+        ({"data_rate_hz": 50.0}, "DATA at 50 Hz"),
+        ({"vicon_rate_hz": 1.0}, "Vicon"),
+        ({"estimator_ok": False}, "estimator not converged"),
+        ({"gravity_ok": False}, "world_to_ned"),
+    ],
+)
+def test_preflight_waits_then_aborts_with_the_reason(change: dict[str, object],
+                                                     failure: str) -> None:
+    sup = Supervisor(SupervisorLimits(preflight_timeout_s=5.0))
+    assert sup.update(obs(0.0, **change)) is State.PREFLIGHT
+    assert any(failure in f for f in sup.preflight_failures)
+    assert sup.update(obs(4.9, **change)) is State.PREFLIGHT
+    assert sup.update(obs(5.1, **change)) is State.ABORTED
+    assert failure in sup.transitions[-1].reason and not sup.success
+
+
+def test_vicon_loss_holds_then_resumes() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.4, vicon_age_s=0.4, **FLYING_AT_1M)) is State.TRACK
+    assert sup.update(obs(t + 0.6, vicon_age_s=0.6, **FLYING_AT_1M)) is State.HOLD
+    assert sup.update(obs(t + 0.7, vicon_age_s=0.01, **FLYING_AT_1M)) is State.TRACK
+
+
+def test_vicon_loss_holds_then_lands() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.6, vicon_age_s=0.6, **FLYING_AT_1M)) is State.HOLD
+    assert sup.update(obs(t + 1.9, vicon_age_s=1.9, **FLYING_AT_1M)) is State.HOLD
+    assert sup.update(obs(t + 2.1, vicon_age_s=2.1, **FLYING_AT_1M)) is State.LAND
+    # Landing continues on the IMU estimate without bouncing back to HOLD.
+    assert sup.update(obs(t + 2.2, vicon_age_s=2.2, **FLYING_AT_1M)) is State.LAND
+
+
+@pytest.mark.parametrize(
+    "change",
+    [{"position": (1.6, 0.0, -1.0)}, {"position": (0.0, -1.6, -1.0)},
+     {"position": (0.0, 0.0, -2.1)}, {"tilt_rad": math.radians(40)}],
+)
+def test_geofence_and_tilt_land(change: dict[str, object]) -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.1, **{**FLYING_AT_1M, **change})) is State.LAND
+
+
+def test_estimator_divergence_hands_back_at_once() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.01, estimator_diverged=True, **FLYING_AT_1M)) is State.HANDBACK
+    assert not sup.commanding and not sup.success
+
+
+def test_link_loss_stops() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.2, data_age_s=0.2, **FLYING_AT_1M)) is State.TRACK
+    assert sup.update(obs(t + 0.4, data_age_s=0.31, **FLYING_AT_1M)) is State.LINK_LOST
+
+
+def test_pilot_switch_is_respected_at_once() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.01, pilot_enabled=False, **FLYING_AT_1M)) is State.PILOT
+
+
+def test_vehicle_not_applying_commands_is_a_takeover_after_grace() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.01, vehicle_applying=False, **FLYING_AT_1M)) is State.TRACK
+    assert sup.update(obs(t + 0.1, vehicle_applying=True, **FLYING_AT_1M)) is State.TRACK
+    assert sup.update(obs(t + 0.2, vehicle_applying=False, **FLYING_AT_1M)) is State.TRACK
+    assert sup.update(obs(t + 0.45, vehicle_applying=False, **FLYING_AT_1M)) is State.PILOT
+
+
+def test_first_signal_lands_second_hands_back() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.1, stop_requests=1, **FLYING_AT_1M)) is State.LAND
+    assert sup.update(obs(t + 0.2, stop_requests=1, **FLYING_AT_1M)) is State.LAND
+    assert sup.update(obs(t + 0.3, stop_requests=2, **FLYING_AT_1M)) is State.HANDBACK
+    assert sup.success  # a requested stop is a normal end
+
+
+def test_signal_with_handback_configured() -> None:
+    sup = Supervisor(SupervisorLimits(on_signal="handback"))
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.1, stop_requests=1, **FLYING_AT_1M)) is State.HANDBACK
+
+
+def test_signal_before_takeoff_hands_back() -> None:
+    sup = Supervisor()
+    assert sup.update(obs(0.0, estimator_ok=False, stop_requests=1)) is State.HANDBACK
+    assert sup.success
+
+
+def test_terminal_states_stay_terminal() -> None:
+    sup = Supervisor()
+    sup.update(obs(0.0, data_age_s=1.0))
+    assert sup.state is State.LINK_LOST
+    assert sup.update(obs(1.0)) is State.LINK_LOST
