@@ -15,7 +15,7 @@ import typer
 
 from groundstation import __version__
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.errors import ConfigError, GroundStationError
+from groundstation.errors import ConfigError, GroundStationError, IdentificationError
 from groundstation.logs import configure_logging
 
 app = typer.Typer(
@@ -87,15 +87,39 @@ def fly(
 
 
 @identify_app.command("thrust")
-def identify_thrust(csv: Annotated[Path, typer.Argument(help="CSV: u_thrust, force_N")]) -> None:
-    """Fit the thrust polynomial (eq. 3.7) to measurements."""
-    raise _fail("not built yet (issue 6)", 1)
+def identify_thrust(
+    csv: Annotated[Path, typer.Argument(help="CSV of thrust-stand measurements.")],
+    gravity: Annotated[float, typer.Option(help="g used to turn mass into force.")] = 9.82,
+) -> None:
+    """Fit the thrust polynomial F_lift(u_thrust) (eq. 3.7) to measurements (App. C.1).
+
+    The CSV format is described in ``groundstation/model/identify.py``;
+    ``tests/data/thrust_table_c1.csv`` is the thesis's Table C.1 in that format.
+    """
+    from groundstation.model.identify import identify_thrust_csv
+
+    try:
+        fit = identify_thrust_csv(csv, g=gravity)
+    except IdentificationError as exc:
+        raise _fail(str(exc), 2) from exc
+    typer.echo(fit.report())
 
 
 @identify_app.command("inflow")
-def identify_inflow(csv: Annotated[Path, typer.Argument(help="CSV: f_net_N, v3_m_s")]) -> None:
-    """Fit the induced-inflow constant I_i (eq. 3.9) to measurements."""
-    raise _fail("not built yet (issue 6)", 1)
+def identify_inflow(
+    csv: Annotated[Path, typer.Argument(help="CSV of steady-climb measurements.")],
+) -> None:
+    """Fit the induced-inflow constant I_i (eq. 3.9) to steady climbs (App. C.2).
+
+    ``tests/data/inflow_table_c2.csv`` is the thesis's Table C.2 in that format.
+    """
+    from groundstation.model.identify import identify_inflow_csv
+
+    try:
+        fit = identify_inflow_csv(csv)
+    except IdentificationError as exc:
+        raise _fail(str(exc), 2) from exc
+    typer.echo(fit.report())
 
 
 def main() -> None:  # pragma: no cover - console entry point alternative
