@@ -130,9 +130,11 @@ class ViconClient:
         self._stop.set()
         sock, thread = self._sock, self._thread
         if sock is not None:
-            # Wakes a blocked recv at once on Linux; elsewhere the poll interval does.
+            # Wake the reader now with an empty datagram to ourselves (it checks the
+            # stop flag first); should that fail, the poll interval still ends it.
             with contextlib.suppress(OSError):
-                sock.shutdown(socket.SHUT_RDWR)
+                host, port = sock.getsockname()[:2]
+                sock.sendto(b"", ("127.0.0.1" if host == "0.0.0.0" else host, port))
         if thread is not None:
             thread.join()
         if sock is not None:

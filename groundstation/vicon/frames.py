@@ -43,6 +43,8 @@ from groundstation.errors import ConfigError
 from groundstation.types import FloatArray
 
 Vector3 = tuple[float, float, float]
+VectorLike = Sequence[float] | FloatArray
+"""A (3,) or (4,) vector given as a float sequence or a numpy array."""
 
 _ORTHONORMAL_TOL = 1e-4
 _GIMBAL_EPS = 1e-12
@@ -143,7 +145,7 @@ def matrix_to_quaternion(m: FloatArray) -> FloatArray:
     return np.array(q) * scale
 
 
-def quaternion_to_matrix(q: Sequence[float] | FloatArray) -> FloatArray:
+def quaternion_to_matrix(q: VectorLike) -> FloatArray:
     """Rotation matrix R(q) (3, 3) of a scalar-first Hamilton quaternion (normalised here)."""
     q0, q1, q2, q3 = (float(v) for v in q)
     n = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
@@ -158,8 +160,8 @@ def quaternion_to_matrix(q: Sequence[float] | FloatArray) -> FloatArray:
 
 
 def vicon_to_ned(
-    translation_mm: Sequence[float],
-    rotation_xyz: Sequence[float],
+    translation_mm: VectorLike,
+    rotation_xyz: VectorLike,
     world_to_ned: FloatArray,
     body_to_object: FloatArray,
 ) -> tuple[FloatArray, FloatArray]:
@@ -175,8 +177,8 @@ def vicon_to_ned(
 
 
 def ned_to_vicon(
-    position: Sequence[float] | FloatArray,
-    quaternion: Sequence[float] | FloatArray,
+    position: VectorLike,
+    quaternion: VectorLike,
     world_to_ned: FloatArray,
     body_to_object: FloatArray,
 ) -> tuple[Vector3, Vector3]:
@@ -213,13 +215,11 @@ class FrameConversion:
         )
 
     def to_ned(
-        self, translation_mm: Sequence[float], rotation_xyz: Sequence[float]
+        self, translation_mm: VectorLike, rotation_xyz: VectorLike
     ) -> tuple[FloatArray, FloatArray]:
         """Vicon (mm, Euler XYZ rad) -> (p_ned (3,) [m], q (4,) scalar first)."""
         return vicon_to_ned(translation_mm, rotation_xyz, self.world_to_ned, self.body_to_object)
 
-    def to_vicon(
-        self, position: Sequence[float] | FloatArray, quaternion: Sequence[float] | FloatArray
-    ) -> tuple[Vector3, Vector3]:
+    def to_vicon(self, position: VectorLike, quaternion: VectorLike) -> tuple[Vector3, Vector3]:
         """NED pose -> (Vicon translation (x, y, z) [mm], Euler XYZ (rx, ry, rz) [rad])."""
         return ned_to_vicon(position, quaternion, self.world_to_ned, self.body_to_object)

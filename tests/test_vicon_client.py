@@ -1,0 +1,162 @@
+"""ViconClient over a real UDP socket on 127.0.0.1 (no mocks).
+
+The client binds port 0 and the test reads the port back; a plain UDP socket
+in the test is the sender. Waits are on data with timeouts, never sleeps.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import struct
+import threading
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from groundstation.errors import ViconError
+from groundstation.vicon.client import ViconClient
+
+TIMEOUT = 5.0  # generous upper bound; the tests return as soon as data arrives
+
+
+def datagram(frame: int, x_mm: float, name: bytes = b"quad") -> bytes:
+    """Spec layout, built by hand: header, one object item, padded to 1024 bytes."""
+    item = struct.pack("<BH24s6d", 0, 72, name, x_mm, 200.0, 1000.0, 0.05, -0.03, 0.4)
+    return (struct.pack("<IB", frame, 1) + item).ljust(1024, b"\0")
+
+
+@pytest.fixture(autouse=True)
+def no_leaked_threads() -> Iterator[None]:
+    before = set(threading.enumerate())
+    yield
+    leaked = [t for t in threading.enumerate() if t not in before and t.is_alive()]
+    assert not leaked, f"threads left running: {leaked}"
+
+
+@pytest.fixture
+def sender() -> Iterator[socket.socket]:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        yield s
+
+
+def test_round_trip_over_loopback(sender: socket.socket) -> None:
+    clock_value = 123.0  # injected clock: the stamp is exactly clock() - latency
+    with ViconClient("127.0.0.1", 0, "quad", latency_s=0.004, clock=lambda: clock_value) as client:
+        host, port = client.address
+        assert host == "127.0.0.1"
+        assert port > 0
+        assert client.latest() is None
+        sender.sendto(datagram(1, 100.0, b"wand"), (host, port))  # other object: no pose
+        for frame in (2, 3, 4):
+            sender.sendto(datagram(frame, 100.0 + frame), (host, port))
+        poses = [client.get(timeout=TIMEOUT) for _ in range(3)]
+        assert all(p is not None for p in poses)
+        assert [p.frame for p in poses if p is not None] == [2, 3, 4]
+        first = poses[0]
+        assert first is not None
+        assert first.t == pytest.approx(123.0 - 0.004)
+        # Vicon (102, 200, 1000) mm -> NED (0.102, -0.2, -1.0) m with the default C_wn.
+        np.testing.assert_allclose(first.position, [0.102, -0.2, -1.0])
+        latest = client.latest()
+        assert latest is not None
+        assert latest.frame == 4
+        h = client.health()
+        assert (h.datagrams, h.poses, h.lost_missing) == (4, 3, 1)
+        assert client.get(timeout=0.01) is None  # queue drained
+
+
+def test_monotonic_stamp_brackets_the_receive(sender: socket.socket) -> None:
+    import time
+
+    with ViconClient("127.0.0.1", 0, "quad", latency_s=0.0) as client:
+        before = time.monotonic()
+        sender.sendto(datagram(1, 0.0), client.address)
+        pose = client.get(timeout=TIMEOUT)
+        after = time.monotonic()
+    assert pose is not None
+    assert before <= pose.t <= after
+
+
+def test_bad_datagrams_do_not_stop_the_reader(sender: socket.socket) -> None:
+    with ViconClient("127.0.0.1", 0, "quad") as client:
+        sender.sendto(b"", client.address)
+        sender.sendto(b"\x01\x00\x00\x00\x05garbage", client.address)
+        sender.sendto(datagram(7, 1.0), client.address)
+        pose = client.get(timeout=TIMEOUT)
+        assert pose is not None
+        assert pose.frame == 7
+        h = client.health()
+    assert h.rejected_datagrams == 2
+    assert h.rejected["short_header"] == 1
+
+
+def test_bind_failure_is_a_vicon_error() -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        client = ViconClient("127.0.0.1", taken.getsockname()[1], "quad")
+        with pytest.raises(ViconError, match="cannot bind") as info:
+            client.start()
+        assert isinstance(info.value, OSError)
+        assert isinstance(info.value.__cause__, OSError)
+        client.close()
+
+
+def test_reader_failure_is_raised_on_the_next_call() -> None:
+    # Replace the socket's descriptor by a pipe: the reader's next recv fails with
+    # ENOTSOCK, a real OS error, which must surface in the user's thread.
+    read_fd, write_fd = os.pipe()
+    try:
+        client = ViconClient("127.0.0.1", 0, "quad", poll_interval_s=0.02).start()
+        os.dup2(read_fd, client.fileno())
+        os.write(write_fd, b"x")
+        with pytest.raises(ViconError, match="reader failed") as info:
+            client.get(timeout=TIMEOUT)
+        assert isinstance(info.value.__cause__, OSError)
+        with pytest.raises(ViconError):
+            client.latest()  # and every call after that
+        with pytest.raises(ViconError):
+            client.health()
+        client.close()
+    finally:
+        os.close(read_fd)
+        os.close(write_fd)
+
+
+def test_lifecycle() -> None:
+    client = ViconClient("127.0.0.1", 0, "quad")
+    with pytest.raises(ViconError, match="not started"):
+        client.get(timeout=0.0)
+    with pytest.raises(ViconError, match="not started"):
+        _ = client.address
+    assert client.start() is client.start()  # second start is a no-op
+    client.close()
+    client.close()  # idempotent
+    assert client.get(timeout=TIMEOUT) is None  # returns at once once closed
+    with pytest.raises(ViconError, match="closed"):
+        client.start()
+
+
+def test_close_wakes_a_blocked_get() -> None:
+    client = ViconClient("127.0.0.1", 0, "quad").start()
+    result: list[object] = []
+    waiter = threading.Thread(target=lambda: result.append(client.get(timeout=TIMEOUT * 4)))
+    waiter.start()
+    client.close()
+    waiter.join(TIMEOUT)
+    assert not waiter.is_alive()
+    assert result == [None]
+
+
+def test_filter_options_are_passed_through(sender: socket.socket) -> None:
+    with ViconClient(
+        "127.0.0.1", 0, "quad", max_speed=0.1, position_slack=0.0, reanchor_after_s=60.0
+    ) as client:
+        assert client.filter.max_speed == 0.1
+        sender.sendto(datagram(1, 0.0), client.address)
+        sender.sendto(datagram(2, 900.0), client.address)  # 0.9 m jump: an outlier
+        sender.sendto(datagram(3, 0.0), client.address)
+        frames = [client.get(timeout=TIMEOUT), client.get(timeout=TIMEOUT)]
+        assert [p.frame for p in frames if p is not None] == [1, 3]
+        assert client.health().outliers == 1

@@ -1,0 +1,312 @@
+"""PoseFilter: frame-number bookkeeping, lost-tracking encodings, outlier gate, health.
+
+Sans-IO: datagrams are built with encode_datagram (its bytes are checked against
+the spec in test_vicon_decoder.py) and fed with simulated receive times.
+Expected values come from the rules in spec/vicon-udp.md and the filter's
+documented defaults.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import pytest
+import structlog
+from structlog.testing import capture_logs
+
+from groundstation.errors import ConfigError
+from groundstation.types import Pose
+from groundstation.vicon.decoder import ObjectPose, encode_datagram
+from groundstation.vicon.posefilter import PoseFilter
+
+NAME = "quad"
+# A plausible tilted pose 1 m up: Vicon (mm, Euler XYZ rad); NED = (0.1, -0.2, -1.0).
+TRANSLATION = (100.0, 200.0, 1000.0)
+ROTATION = (0.05, -0.03, 0.4)
+
+
+def obj(
+    translation: Sequence[float] = TRANSLATION,
+    rotation: Sequence[float] = ROTATION,
+    name: str = NAME,
+) -> ObjectPose:
+    return ObjectPose(name, tuple(translation), tuple(rotation))  # type: ignore[arg-type]
+
+
+def feed(f: PoseFilter, frame: int, t: float, *objects: ObjectPose) -> Pose | None:
+    return f.process(encode_datagram(frame, objects or (obj(),)), t)
+
+
+def moving(i: int, speed_mm_per_frame: float = 5.0) -> ObjectPose:
+    """Frame i of a smooth 0.5 m/s motion at 100 Hz (5 mm per frame along Vicon x)."""
+    return obj((TRANSLATION[0] + speed_mm_per_frame * i, TRANSLATION[1], TRANSLATION[2]))
+
+
+def test_a_pose_is_converted_and_stamped() -> None:
+    f = PoseFilter(NAME, latency_s=0.004)
+    pose = feed(f, 17, 10.0)
+    assert pose is not None
+    assert pose.t == pytest.approx(10.0 - 0.004)  # receive time minus configured latency
+    assert pose.frame == 17
+    np.testing.assert_allclose(pose.position, [0.1, -0.2, -1.0])  # default C_wn = diag(1,-1,-1)
+    assert pose.quaternion[0] > 0
+    assert f.health(10.0).poses == 1
+
+
+def test_other_objects_are_ignored() -> None:
+    f = PoseFilter(NAME)
+    pose = feed(f, 1, 0.0, obj((9.0, 9.0, 9.0), name="wand"), obj(), obj(name="quad2"))
+    assert pose is not None
+    np.testing.assert_allclose(pose.position, [0.1, -0.2, -1.0])
+
+
+# --- frame numbers ------------------------------------------------------------
+
+
+def test_gaps_duplicates_and_reordering() -> None:
+    f = PoseFilter(NAME)
+    t = 0.0
+    accepted = []
+    # frames 1, 2, 5 (gap of 2), 5 (duplicate), 4 (late), 6, 10 (gap of 3)
+    for frame in (1, 2, 5, 5, 4, 6, 10):
+        t += 0.01
+        accepted.append(feed(f, frame, t, moving(frame)) is not None)
+    assert accepted == [True, True, True, False, False, True, True]
+    h = f.health(t)
+    assert (h.frames_dropped, h.duplicates, h.reordered, h.restarts) == (5, 1, 1, 0)
+    assert h.poses == 5
+
+
+def test_restart_after_large_backward_jump() -> None:
+    f = PoseFilter(NAME, restart_backward_frames=1000)
+    assert feed(f, 50_000, 0.00) is not None
+    assert feed(f, 49_000, 0.01) is None  # jump of exactly 1000: still "old"
+    assert feed(f, 48_999, 0.02) is not None  # 1001 back: a Tracker restart
+    assert feed(f, 49_000, 0.03) is not None  # and counting continues from there
+    h = f.health(0.03)
+    assert (h.restarts, h.reordered, h.frames_dropped) == (1, 1, 0)
+
+
+def test_restart_after_silence_and_uint32_wrap() -> None:
+    f = PoseFilter(NAME, restart_silence_s=1.0)
+    assert feed(f, 500, 0.0) is not None
+    assert feed(f, 400, 0.9) is None  # 0.9 s silence: just reordered
+    assert feed(f, 400, 2.0) is not None  # 1.1 s since the last accepted frame: restart
+    assert feed(f, 2**32 - 1, 2.01) is not None  # a forward jump is a (large) gap
+    assert feed(f, 0, 2.02) is not None  # wrap-around: a large backward jump
+    h = f.health(2.02)
+    assert h.restarts == 2
+    assert h.reordered == 1
+    assert h.frames_dropped == 2**32 - 1 - 400 - 1
+
+
+# --- lost tracking --------------------------------------------------------------
+
+
+def test_object_missing_is_no_measurement() -> None:
+    f = PoseFilter(NAME)
+    assert feed(f, 1, 0.0, obj(name="wand")) is None
+    assert f.process(encode_datagram(2, []), 0.01) is None
+    assert f.health(0.01).lost_missing == 2
+
+
+def test_all_zero_pose_is_no_measurement() -> None:
+    f = PoseFilter(NAME)
+    assert feed(f, 1, 0.00) is not None
+    assert feed(f, 2, 0.01, obj((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))) is None
+    assert feed(f, 3, 0.02, obj((-0.0, 0.0, 0.0), (0.0, -0.0, 0.0))) is None
+    h = f.health(0.02)
+    assert (h.lost_zero, h.lost_held_identity, h.poses) == (2, 0, 1)
+
+
+def test_held_position_with_identity_rotation_is_no_measurement() -> None:
+    # Thesis Ch. 7.3.1: position kept at its last value, orientation reset.
+    f = PoseFilter(NAME)
+    assert feed(f, 1, 0.00) is not None
+    assert feed(f, 2, 0.01, obj(TRANSLATION, (0.0, 0.0, 0.0))) is None
+    assert feed(f, 3, 0.02, obj(TRANSLATION, (0.0, 0.0, 0.0))) is None
+    assert feed(f, 4, 0.03) is not None  # tracking back
+    h = f.health(0.03)
+    assert (h.lost_held_identity, h.lost_zero, h.poses) == (2, 0, 2)
+
+
+def test_identity_rotation_without_history_is_no_measurement() -> None:
+    f = PoseFilter(NAME)
+    assert feed(f, 1, 0.0, obj(TRANSLATION, (0.0, 0.0, 0.0))) is None
+    assert f.health(0.0).lost_held_identity == 1
+
+
+def test_identity_rotation_with_a_new_position_is_a_measurement() -> None:
+    # Only *held* position + identity is the lost encoding; a moving level vehicle
+    # facing Vicon +x really reads rotations (0, 0, 0).
+    f = PoseFilter(NAME)
+    assert feed(f, 1, 0.00, obj(TRANSLATION, (0.01, 0.0, 0.0))) is not None
+    pose = feed(f, 2, 0.01, obj((101.0, 200.0, 1000.0), (0.0, 0.0, 0.0)))
+    assert pose is not None
+    np.testing.assert_array_equal(pose.quaternion, [1.0, 0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_non_finite_values_are_no_measurement(bad: float) -> None:
+    f = PoseFilter(NAME)
+    assert feed(f, 1, 0.0, obj((bad, 0.0, 1000.0))) is None
+    assert feed(f, 2, 0.01, obj(TRANSLATION, (0.1, bad, 0.0))) is None
+    assert f.health(0.01).non_finite == 2
+
+
+def test_malformed_datagram_is_counted() -> None:
+    f = PoseFilter(NAME)
+    assert f.process(b"\x01\x00", 0.0) is None
+    assert f.process(encode_datagram(1, [obj()], pad_to=None)[:-8], 0.01) is None
+    h = f.health(0.01)
+    assert h.rejected == {"short_header": 1, "item_header_truncated": 0, "item_data_truncated": 1}
+    assert h.rejected_datagrams == 2
+    assert h.datagrams == 2
+
+
+# --- plausibility gate ----------------------------------------------------------
+
+
+def test_position_gate_boundary() -> None:
+    # limit: |dp| <= max_speed * dt + slack = 5 m/s * 0.01 s + 0 = 50 mm
+    f = PoseFilter(NAME, latency_s=0.0, position_slack=0.0, max_speed=5.0)
+    assert feed(f, 1, 0.00, obj((0.0, 0.0, 1000.0))) is not None
+    assert feed(f, 2, 0.01, obj((51.0, 0.0, 1000.0))) is None
+    assert feed(f, 3, 0.02, obj((0.0, 0.0, 1000.0 - 99.0))) is not None  # 99 mm in 20 ms
+    assert f.health(0.02).outliers == 1
+
+
+def test_rotation_gate_boundary() -> None:
+    # limit: angle <= 30 rad/s * 0.01 s + 0 = 0.3 rad (rotation about one axis: angle = |rz|)
+    f = PoseFilter(NAME, latency_s=0.0, angle_slack=0.0)
+    assert feed(f, 1, 0.00, obj(TRANSLATION, (0.0, 0.0, 0.1))) is not None
+    assert feed(f, 2, 0.01, obj(TRANSLATION, (0.0, 0.0, 0.41))) is None  # 0.31 rad
+    assert feed(f, 3, 0.02, obj(TRANSLATION, (0.0, 0.0, 0.69))) is not None  # 0.59 rad in 20 ms
+    # 0.69 -> -pi + 0.1 is 2 pi - 3.73 = 2.55 rad the short way round: rejected.
+    assert feed(f, 4, 0.03, obj(TRANSLATION, (0.0, 0.0, -math.pi + 0.1))) is None
+    assert f.health(0.03).outliers == 2
+
+
+def test_rotation_gate_uses_the_short_way_round() -> None:
+    f = PoseFilter(NAME, latency_s=0.0, angle_slack=0.0)
+    assert feed(f, 1, 0.00, obj(TRANSLATION, (0.0, 0.0, math.pi - 0.1))) is not None
+    assert feed(f, 2, 0.01, obj(TRANSLATION, (0.0, 0.0, -math.pi + 0.1))) is not None  # 0.2 rad
+
+
+def test_outlier_does_not_move_the_anchor() -> None:
+    f = PoseFilter(NAME)
+    for i in range(5):
+        assert feed(f, i, i * 0.01, moving(i)) is not None
+    assert feed(f, 5, 0.05, obj((5000.0, 0.0, 0.0))) is None  # 5 m jump in 10 ms
+    assert feed(f, 6, 0.06, moving(6)) is not None
+    assert f.health(0.06).outliers == 1
+
+
+def test_reanchor_after_a_long_gap() -> None:
+    # The first pose is wrong (a reflection elsewhere); the real vehicle is 2 m away.
+    f = PoseFilter(NAME, reanchor_after_s=0.5, max_speed=1.0)
+    far = obj((2100.0, 200.0, 1000.0))
+    assert feed(f, 0, 0.0) is not None
+    results = [feed(f, i, i * 0.01, far) for i in range(1, 100)]
+    first = next(i for i, r in enumerate(results, start=1) if r is not None)
+    # 2 m at 1 m/s needs 1.98 s with 0.02 m slack, but re-anchoring comes first,
+    # at the first datagram more than 0.5 s after the last accepted one.
+    assert first == 51
+    assert all(r is not None for r in results[first - 1 :])
+    h = f.health(1.0)
+    assert (h.reanchors, h.outliers) == (1, 50)
+
+
+def test_gate_after_lost_tracking_allows_motion_in_proportion_to_time() -> None:
+    f = PoseFilter(NAME, reanchor_after_s=10.0, position_slack=0.0)
+    assert feed(f, 0, 0.0, obj((0.0, 0.0, 1000.0))) is not None
+    for i in range(1, 40):  # 0.39 s without the object
+        assert feed(f, i, i * 0.01, obj(name="other")) is None
+    # 1.5 m after 0.4 s is 3.75 m/s: plausible.
+    assert feed(f, 40, 0.40, obj((1500.0, 0.0, 1000.0))) is not None
+    assert f.health(0.4).outliers == 0
+
+
+# --- health ------------------------------------------------------------------
+
+
+def test_rate_and_time_since_pose() -> None:
+    f = PoseFilter(NAME)
+    for i in range(200):  # 100 Hz for 2 s
+        feed(f, i, i * 0.01, moving(i))
+    h = f.health(1.995)
+    assert h.rate_hz == pytest.approx(100.0)  # 100 poses in (0.995, 1.995]
+    assert h.time_since_pose_s == pytest.approx(0.005)
+    assert h.rate_in_band
+    later = f.health(3.0)
+    assert later.rate_hz == 0.0
+    assert later.time_since_pose_s == pytest.approx(1.01)
+
+
+def test_no_pose_yet() -> None:
+    f = PoseFilter(NAME)
+    h = f.health(5.0)
+    assert h.time_since_pose_s == math.inf
+    assert h.rate_hz == 0.0
+    assert h.poses == 0
+
+
+def test_rate_warning_is_rate_limited_and_recovers() -> None:
+    with capture_logs() as logs:
+        f = PoseFilter(NAME, min_rate_hz=8.0, max_rate_hz=120.0, warn_interval_s=5.0)
+        for i in range(20):  # 1 Hz for 20 s
+            feed(f, i, float(i), moving(i, 0.0))
+        low = f.health(19.5)
+        warnings = [e for e in logs if e["event"] == "vicon_rate_out_of_band"]
+        # One warning per 5 s while out of band (t = 1, 6, 11, 16), not one per datagram.
+        assert len(warnings) == 4
+        assert warnings[0]["log_level"] == "warning"
+        assert warnings[0]["rate_hz"] == pytest.approx(1.0)
+        assert low.rate_warnings == 4
+        assert not low.rate_in_band
+        for i in range(20, 220):  # back to 100 Hz
+            feed(f, i, 19.0 + (i - 19) * 0.01, moving(i, 0.0))
+        assert f.health(21.0).rate_in_band
+        assert [e["event"] for e in logs].count("vicon_rate_recovered") == 1
+
+
+def test_rate_warning_when_datagrams_stop_and_not_during_first_window() -> None:
+    with capture_logs() as logs:
+        f = PoseFilter(NAME, warn_interval_s=5.0)
+        f.health(100.0)
+        f.health(100.9)  # within the first rate window: no verdict yet
+        assert logs == []
+        f.health(101.0)  # a full second without any datagram
+        assert [e["event"] for e in logs] == ["vicon_rate_out_of_band"]
+
+
+def test_custom_logger_receives_the_warning() -> None:
+    with capture_logs() as logs:
+        log = structlog.get_logger("test").bind(vehicle="x3d")
+        f = PoseFilter(NAME, logger=log)
+        f.health(0.0)
+        f.health(2.0)
+    assert logs[0]["vehicle"] == "x3d"
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"max_speed": -1.0},
+        {"latency_s": math.nan},
+        {"reanchor_after_s": -0.1},
+        {"min_rate_hz": 10.0, "max_rate_hz": 5.0},
+        {"rate_window_s": 0.0},
+        {"world_to_ned": np.diag([1.0, 1.0, -1.0])},
+    ],
+)
+def test_invalid_parameters_are_refused_at_construction(kwargs: dict[str, object]) -> None:
+    with pytest.raises(ConfigError):
+        PoseFilter(NAME, **kwargs)  # type: ignore[arg-type]
+
+
+def test_empty_name_is_refused() -> None:
+    with pytest.raises(ConfigError, match="invalid Vicon parameters"):
+        PoseFilter("")
