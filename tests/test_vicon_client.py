@@ -160,3 +160,17 @@ def test_filter_options_are_passed_through(sender: socket.socket) -> None:
         frames = [client.get(timeout=TIMEOUT), client.get(timeout=TIMEOUT)]
         assert [p.frame for p in frames if p is not None] == [1, 3]
         assert client.health().outliers == 1
+
+
+def test_from_config(sender: socket.socket) -> None:
+    from groundstation.config import load_config
+
+    cfg = load_config("config/sim.yaml").vicon
+    # Port 0 for the test (model_copy does not re-validate the 1..65535 range).
+    cfg = cfg.model_copy(update={"bind_address": "127.0.0.1", "port": 0})
+    with ViconClient.from_config(cfg, clock=lambda: 7.0) as client:
+        sender.sendto(datagram(1, 0.0, cfg.object_name.encode()), client.address)
+        pose = client.get(timeout=TIMEOUT)
+    assert pose is not None
+    assert pose.t == pytest.approx(7.0 - cfg.latency_s)
+    np.testing.assert_allclose(pose.position, [0.0, -0.2, -1.0], atol=1e-15)

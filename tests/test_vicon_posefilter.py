@@ -310,3 +310,25 @@ def test_invalid_parameters_are_refused_at_construction(kwargs: dict[str, object
 def test_empty_name_is_refused() -> None:
     with pytest.raises(ConfigError, match="invalid Vicon parameters"):
         PoseFilter("")
+
+
+def test_from_lab_config() -> None:
+    # config/lab.yaml: Rx(180 deg) for both rotations, 8 Hz minimum, 100 Hz expected.
+    from groundstation.config import load_config
+
+    cfg = load_config("config/lab.yaml").vicon
+    f = PoseFilter.from_config(cfg)
+    assert f.object_name == cfg.object_name
+    np.testing.assert_allclose(f.frames.world_to_ned, np.diag([1.0, -1.0, -1.0]), atol=1e-15)
+    np.testing.assert_allclose(f.frames.body_to_object, np.diag([1.0, -1.0, -1.0]), atol=1e-15)
+    assert (f.latency_s, f.max_speed, f.max_rotation_rate) == (
+        cfg.latency_s,
+        cfg.max_speed_m_s,
+        cfg.max_rotation_rate_rad_s,
+    )
+    assert f.restart_backward_frames == cfg.restart_backjump_frames
+    assert f.rate.min_rate_hz == 8.0
+    assert f.rate.max_rate_hz == pytest.approx(1.2 * 100.0)  # MAX_RATE_FACTOR * expected rate
+    pose = f.process(encode_datagram(1, [obj(name=cfg.object_name)]), 1.0)
+    assert pose is not None
+    np.testing.assert_allclose(pose.position, [0.1, -0.2, -1.0], atol=1e-15)

@@ -28,7 +28,7 @@ from groundstation.vicon.frames import (
     vicon_to_ned,
 )
 from groundstation.vicon.health import RateMonitor, ViconHealth
-from groundstation.vicon.posefilter import FilterOptions, PoseFilter
+from groundstation.vicon.posefilter import FilterOptions, PoseFilter, filter_options
 
 __all__ = [
     "DEFAULT_BODY_TO_OBJECT",
@@ -46,6 +46,7 @@ __all__ = [
     "ViconHealth",
     "decode_datagram",
     "encode_datagram",
+    "filter_options",
     "ned_to_vicon",
     "vicon_to_ned",
 ]

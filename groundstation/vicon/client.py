@@ -21,7 +21,7 @@ import threading
 import time
 from collections.abc import Callable
 from types import TracebackType
-from typing import Unpack
+from typing import TYPE_CHECKING, Unpack
 
 import numpy.typing as npt
 import structlog
@@ -30,7 +30,10 @@ from groundstation.errors import ViconError
 from groundstation.types import Pose
 from groundstation.vicon.frames import DEFAULT_BODY_TO_OBJECT, DEFAULT_WORLD_TO_NED
 from groundstation.vicon.health import ViconHealth
-from groundstation.vicon.posefilter import FilterOptions, PoseFilter
+from groundstation.vicon.posefilter import FilterOptions, PoseFilter, filter_options
+
+if TYPE_CHECKING:  # config is only needed by from_config; no import cycle at run time
+    from groundstation.config import ViconConfig
 
 DEFAULT_PORT = 51001
 MAX_DATAGRAM = 65536
@@ -93,6 +96,27 @@ class ViconClient:
         self._sock: socket.socket | None = None
         self._thread: threading.Thread | None = None
         self._closed = False
+
+    @classmethod
+    def from_config(
+        cls,
+        config: ViconConfig,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        logger: structlog.typing.FilteringBoundLogger | None = None,
+    ) -> ViconClient:
+        """Build (not start) a client from the ``vicon:`` configuration section."""
+        return cls(
+            config.bind_address,
+            config.port,
+            config.object_name,
+            config.world_to_ned.as_matrix(),
+            config.body_to_object.as_matrix(),
+            config.latency_s,
+            clock=clock,
+            logger=logger,
+            **filter_options(config),
+        )
 
     # -- lifecycle -------------------------------------------------------------
 

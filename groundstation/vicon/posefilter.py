@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from types import MappingProxyType
-from typing import TypedDict
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -47,6 +47,12 @@ from groundstation.vicon.frames import (
     FrameConversion,
 )
 from groundstation.vicon.health import RateMonitor, ViconHealth
+
+if TYPE_CHECKING:  # config is only needed by from_config; no import cycle at run time
+    from groundstation.config import ViconConfig
+
+MAX_RATE_FACTOR = 1.2
+"""from_config: warn above expected_rate_hz * 1.2 (a faster stream is misconfigured)."""
 
 
 class FilterOptions(TypedDict, total=False):
@@ -63,6 +69,21 @@ class FilterOptions(TypedDict, total=False):
     min_rate_hz: float
     max_rate_hz: float
     warn_interval_s: float
+
+
+def filter_options(config: ViconConfig) -> FilterOptions:
+    """The :class:`FilterOptions` a ``vicon:`` configuration section asks for.
+
+    max_rate_hz is not configured: it is ``MAX_RATE_FACTOR * expected_rate_hz``.
+    """
+    return FilterOptions(
+        restart_silence_s=config.restart_silence_s,
+        restart_backward_frames=config.restart_backjump_frames,
+        max_speed=config.max_speed_m_s,
+        max_rotation_rate=config.max_rotation_rate_rad_s,
+        min_rate_hz=config.min_rate_hz,
+        max_rate_hz=MAX_RATE_FACTOR * config.expected_rate_hz,
+    )
 
 
 class PoseFilter:
@@ -148,6 +169,20 @@ class PoseFilter:
         self.frames_dropped = self.duplicates = self.reordered = self.restarts = 0
         self.lost_missing = self.lost_zero = self.lost_held_identity = self.non_finite = 0
         self.outliers = self.reanchors = self.poses = 0
+
+    @classmethod
+    def from_config(
+        cls, config: ViconConfig, logger: structlog.typing.FilteringBoundLogger | None = None
+    ) -> PoseFilter:
+        """Build from the ``vicon:`` configuration section (see :func:`filter_options`)."""
+        return cls(
+            config.object_name,
+            world_to_ned=config.world_to_ned.as_matrix(),
+            body_to_object=config.body_to_object.as_matrix(),
+            latency_s=config.latency_s,
+            logger=logger,
+            **filter_options(config),
+        )
 
     def process(self, datagram: bytes | bytearray | memoryview, t_receive: float) -> Pose | None:
         """Process one datagram received at monotonic time ``t_receive`` [s].
