@@ -1,0 +1,492 @@
+"""Flight recorder: one row per control tick, written incrementally to a ``.npy`` file.
+
+A flight is one directory ``<log_dir>/<UTC start, YYYYMMDDTHHMMSSZ>/`` holding
+
+``flight.npy``
+    a numpy structured array, one row per tick, one *scalar* column per value
+    (:data:`FLAT_DTYPE`), so ``np.load(path)`` and ``pandas.DataFrame(np.load(path))``
+    read it in one line. The header is written once with a fixed-width shape field;
+    every :meth:`FlightRecorder.flush` appends the buffered rows and then rewrites
+    only the row count, so the file is loadable after every flush and a process
+    killed with SIGKILL leaves everything up to the last flush (at most
+    ``flush_interval_s`` = 1 s is lost).
+``config.yaml``
+    the configuration the flight used, verbatim.
+``meta.json``
+    package version, start wall-clock time (ISO 8601 UTC) and monotonic time,
+    the unit of every column, the caller's metadata (by convention
+    ``supervisor_states``: the state names, indexed by the ``state`` column) and,
+    after a clean close, end times and counters.
+
+In memory and from :func:`read_flight` the same bytes are viewed as
+:data:`RECORD_DTYPE`, whose vector values are sub-array fields
+(``data["est_position"]`` is an ``(N, 3)`` array). Both dtypes have identical
+layouts; the flat column of a vector field is ``<field>_<component>``
+(``est_position_x``, ``est_quaternion_q0``, ``est_covariance_diag_bgx``).
+
+Fields (frames: NED earth, FRD body; quaternions scalar-first, R(q) = eCb)::
+
+    t                    s        time.monotonic() when the tick was recorded
+    imu_t                s        monotonic receive time of the IMU sample
+    imu_counter          -        DATA sample counter (uint16, wraps)
+    gyro_counts  (3,)    count    raw 12-bit gyro ADC counts, FRD axes
+    acc_counts   (3,)    count    raw 12-bit accelerometer counts, FRD axes
+    gyro         (3,)    rad/s    scaled body rates, FRD
+    acc          (3,)    m/s^2    scaled specific force, FRD
+    vicon_valid          bool     a Vicon pose was used this tick
+    vicon_t              s        monotonic measurement time of that pose (NaN if none)
+    vicon_position (3,)  m        pose position, NED (NaN if none)
+    vicon_quaternion (4,) -       pose attitude, scalar-first (NaN if none)
+    est_position (3,)    m        estimate, NED (NaN before the estimator runs)
+    est_quaternion (4,)  -        estimated attitude, scalar-first
+    est_velocity_body (3,) m/s    velocity relative to earth, FRD axes
+    est_omega    (3,)    rad/s    bias-corrected body rates, FRD
+    est_gyro_bias (3,)   rad/s    FRD
+    est_acc_bias (3,)    m/s^2    FRD
+    est_covariance_diag (16,)     P diagonal [p(3) m^2, q(4) -, v(3) (m/s)^2,
+                                  gyro bias(3) (rad/s)^2, acc bias(3) (m/s^2)^2]
+    ref_position (3,)    m        reference, NED (NaN when there is none)
+    ref_velocity (3,)    m/s      reference velocity, NED
+    ref_yaw              rad      reference heading
+    cmd_pitch, cmd_roll, cmd_yaw  RC unit  stick values, -2048..2047 (thesis signs)
+    cmd_thrust           RC unit  0..4096
+    cmd_mask             bits     ctrl mask (bit0 pitch .. bit3 thrust)
+    cmd_sent             bool     a COMMAND frame was written this tick
+    state                -        supervisor state (names in meta["supervisor_states"])
+    compute_time         s        time spent computing this tick
+    jitter               s        tick start minus its scheduled time
+    latency              s        command write time minus IMU receive time
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import structlog
+
+from groundstation import __version__
+from groundstation.errors import GroundStationError
+from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
+
+log = structlog.get_logger(__name__)
+
+SCHEMA_VERSION = 1
+"""Bumped whenever :data:`RECORD_DTYPE` changes; stored in meta.json."""
+
+_XYZ = ("x", "y", "z")
+_Q = ("q0", "q1", "q2", "q3")
+_COV = ("px", "py", "pz", "q0", "q1", "q2", "q3", "vx", "vy", "vz",
+        "bgx", "bgy", "bgz", "bax", "bay", "baz")
+_COV_UNITS = ("m^2",) * 3 + ("1",) * 4 + ("(m/s)^2",) * 3 + ("(rad/s)^2",) * 3 + ("(m/s^2)^2",) * 3
+
+# (name, numpy type, components or None for a scalar, unit or per-component units)
+_SCHEMA: tuple[tuple[str, str, tuple[str, ...] | None, str | tuple[str, ...]], ...] = (
+    ("t", "<f8", None, "s"),
+    ("imu_t", "<f8", None, "s"),
+    ("imu_counter", "<u2", None, "1"),
+    ("gyro_counts", "<u2", _XYZ, "count"),
+    ("acc_counts", "<u2", _XYZ, "count"),
+    ("gyro", "<f8", _XYZ, "rad/s"),
+    ("acc", "<f8", _XYZ, "m/s^2"),
+    ("vicon_valid", "|b1", None, "bool"),
+    ("vicon_t", "<f8", None, "s"),
+    ("vicon_position", "<f8", _XYZ, "m"),
+    ("vicon_quaternion", "<f8", _Q, "1"),
+    ("est_position", "<f8", _XYZ, "m"),
+    ("est_quaternion", "<f8", _Q, "1"),
+    ("est_velocity_body", "<f8", _XYZ, "m/s"),
+    ("est_omega", "<f8", _XYZ, "rad/s"),
+    ("est_gyro_bias", "<f8", _XYZ, "rad/s"),
+    ("est_acc_bias", "<f8", _XYZ, "m/s^2"),
+    ("est_covariance_diag", "<f8", _COV, _COV_UNITS),
+    ("ref_position", "<f8", _XYZ, "m"),
+    ("ref_velocity", "<f8", _XYZ, "m/s"),
+    ("ref_yaw", "<f8", None, "rad"),
+    ("cmd_pitch", "<i2", None, "RC unit"),
+    ("cmd_roll", "<i2", None, "RC unit"),
+    ("cmd_yaw", "<i2", None, "RC unit"),
+    ("cmd_thrust", "<i2", None, "RC unit"),
+    ("cmd_mask", "|u1", None, "bits"),
+    ("cmd_sent", "|b1", None, "bool"),
+    ("state", "|u1", None, "enum"),
+    ("compute_time", "<f8", None, "s"),
+    ("jitter", "<f8", None, "s"),
+    ("latency", "<f8", None, "s"),
+)
+
+RECORD_DTYPE = np.dtype([
+    (name, typ) if comps is None else (name, typ, (len(comps),))
+    for name, typ, comps, _ in _SCHEMA
+])
+"""One tick, vector values as sub-array fields (see the module docstring for units)."""
+
+FLAT_DTYPE = np.dtype([
+    (name if comps is None else f"{name}_{c}", typ)
+    for name, typ, comps, _ in _SCHEMA
+    for c in (comps or ("",))
+])
+"""The same bytes as :data:`RECORD_DTYPE` with one scalar column per value (on disk, CSV)."""
+
+COLUMN_UNITS: dict[str, str] = {
+    (name if comps is None else f"{name}_{c}"): (unit if isinstance(unit, str) else unit[k])
+    for name, _, comps, unit in _SCHEMA
+    for k, c in enumerate(comps or ("",))
+}
+"""Unit of every flat column, as stored in meta.json."""
+
+
+FLIGHT_FILE = "flight.npy"
+CONFIG_FILE = "config.yaml"
+META_FILE = "meta.json"
+
+# .npy v1.0 header with the shape first and fixed-width, so a flush rewrites only the
+# digits at a fixed offset (np.load accepts the spaces: the header is a Python literal).
+_SHAPE_WIDTH = 20
+_HEADER_PREFIX = "{'shape': ("
+_DESCR = repr(np.lib.format.dtype_to_descr(FLAT_DTYPE))
+
+
+def _header_text(count: int) -> str:
+    """The header dict for ``count`` rows; its length does not depend on ``count``."""
+    shape = f"{_HEADER_PREFIX}{count:>{_SHAPE_WIDTH}},), "
+    return shape + f"'fortran_order': False, 'descr': {_DESCR}, }}"
+
+
+_MAGIC = np.lib.format.magic(1, 0)
+_HEADER_LEN = -(-(len(_MAGIC) + 2 + len(_header_text(0)) + 1) // 64) * 64
+_COUNT_OFFSET = len(_MAGIC) + 2 + len(_HEADER_PREFIX)
+if _HEADER_LEN > 10_000 or FLAT_DTYPE.itemsize != RECORD_DTYPE.itemsize:  # pragma: no cover
+    raise RuntimeError("recorder schema: header beyond np.load's limit or layouts differ")
+
+
+def _header(count: int) -> bytes:
+    """The complete .npy header (magic, length, dict, padding) for ``count`` rows."""
+    text = _header_text(count)
+    body_len = _HEADER_LEN - len(_MAGIC) - 2
+    body = text.ljust(body_len - 1) + "\n"
+    return _MAGIC + body_len.to_bytes(2, "little") + body.encode("latin1")
+
+
+def _count_field(count: int) -> bytes:
+    """The fixed-width row count written at ``_COUNT_OFFSET`` on every flush."""
+    return f"{count:>{_SHAPE_WIDTH}}".encode("latin1")
+
+
+def _new_flight_dir(log_dir: Path, start: dt.datetime) -> Path:
+    """Create ``log_dir/<UTC stamp>`` (with ``-2``, ``-3``... if that exists)."""
+    log_dir.mkdir(parents=True, exist_ok=True)
+    stamp = start.strftime("%Y%m%dT%H%M%SZ")
+    for k in range(1, 1000):
+        path = log_dir / (stamp if k == 1 else f"{stamp}-{k}")
+        try:
+            path.mkdir()
+        except FileExistsError:
+            continue
+        return path
+    raise FileExistsError(f"{log_dir}: too many flights stamped {stamp}")
+
+
+def _write_json(path: Path, data: Mapping[str, Any]) -> None:
+    """Write JSON atomically (temporary file, then rename)."""
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(data, indent=2, default=str) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _columns(buf: npt.NDArray[np.void]) -> dict[str, npt.NDArray[Any]]:
+    """One view per field of ``buf`` (looked up per tick instead of ``buf[name]``)."""
+    return {name: buf[name] for name in RECORD_DTYPE.names or ()}
+
+
+def _pwrite_all(fd: int, data: memoryview, offset: int) -> None:
+    """pwrite until every byte of ``data`` is at ``offset`` (regular files may write short)."""
+    while data:
+        written = os.pwrite(fd, data, offset)
+        data = data[written:]
+        offset += written
+
+
+class FlightRecorder:
+    """Writes one flight: rows to ``flight.npy``, plus ``config.yaml`` and ``meta.json``.
+
+    Open one with :meth:`create`. Each tick call :meth:`append` (about 7 us: it copies
+    the values into a preallocated row of a numpy buffer, no allocation, no I/O
+    except when a flush is due). The buffer is written out when ``flush_interval_s``
+    has passed since the last flush (judged on the ticks' own ``t``), when it is
+    full, and on :meth:`close`. Writes go straight to the kernel (``os.pwrite``),
+    so a killed process loses only the rows since the last flush; :meth:`close`
+    also fsyncs. A failed write (disk full) is logged and counted, never raised:
+    the flight goes on without those rows.
+    """
+
+    def __init__(
+        self, directory: Path, meta: dict[str, Any], *,
+        flush_interval_s: float = 1.0, capacity: int = 1024,
+    ) -> None:
+        """Open ``directory/flight.npy`` (must not exist); prefer :meth:`create`.
+
+        flush_interval_s : longest time rows stay in memory [s], > 0
+        capacity : rows buffered in memory, >= 1 (flushes early when full)
+        """
+        if not flush_interval_s > 0 or capacity < 1:
+            raise ValueError("flush_interval_s must be > 0 and capacity >= 1")
+        self.directory = directory
+        self.path = directory / FLIGHT_FILE
+        self.meta = meta
+        self._interval = float(flush_interval_s)
+        self._capacity = int(capacity)
+        self._buf = np.zeros(self._capacity, dtype=RECORD_DTYPE)
+        self._bytes = self._buf.view(np.uint8)
+        self._cols = _columns(self._buf)
+        self._n = 0
+        self._on_disk = 0
+        self._flush_due = -np.inf  # the first row is written at once
+        self.rows_dropped = 0
+        """Rows lost to failed writes."""
+        self.bad_rows = 0
+        """append() calls whose values did not fit the record (skipped)."""
+        self.write_errors = 0
+        """Failed flushes."""
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
+        try:
+            _pwrite_all(self._fd, memoryview(_header(0)), 0)
+        except OSError:
+            os.close(self._fd)
+            raise
+
+    @classmethod
+    def create(
+        cls, log_dir: str | Path, config_yaml: str, meta: Mapping[str, Any] | None = None, *,
+        flush_interval_s: float = 1.0, capacity: int = 1024,
+    ) -> FlightRecorder:
+        """Start a flight log in a new directory ``log_dir/<UTC start time>/``.
+
+        config_yaml : the configuration text, stored verbatim as config.yaml
+        meta : extra metadata for meta.json, e.g.
+            ``{"supervisor_states": [s.name for s in State]}`` (JSON-serialisable;
+            the recorder's own keys ``format``, ``schema_version``, ``version``,
+            ``start_time``, ``start_monotonic``, ``units`` take precedence)
+        Raises GroundStationError if the directory or files cannot be written.
+        """
+        start_wall = dt.datetime.now(dt.UTC)
+        start_mono = time.monotonic()
+        full = {
+            **(meta or {}),
+            "format": "groundstation flight log",
+            "schema_version": SCHEMA_VERSION,
+            "version": __version__,
+            "start_time": start_wall.isoformat(),
+            "start_monotonic": start_mono,
+            "units": COLUMN_UNITS,
+        }
+        try:
+            directory = _new_flight_dir(Path(log_dir), start_wall)
+            (directory / CONFIG_FILE).write_text(config_yaml, encoding="utf-8")
+            _write_json(directory / META_FILE, full)
+            return cls(directory, full, flush_interval_s=flush_interval_s, capacity=capacity)
+        except OSError as exc:
+            raise GroundStationError(f"cannot start a flight log in {log_dir}: {exc}") from exc
+
+    @property
+    def rows(self) -> int:
+        """Rows appended so far (written and buffered), excluding dropped ones."""
+        return self._on_disk + self._n
+
+    @property
+    def closed(self) -> bool:
+        """True after :meth:`close`."""
+        return self._fd < 0
+
+    def append(
+        self, *, t: float, imu: ImuSample, gyro_counts: Sequence[int], acc_counts: Sequence[int],
+        pose: Pose | None, estimate: StateEstimate | None, reference: Reference | None,
+        sticks: Sticks, ctrl_mask: int, sent: bool, state: int,
+        compute_time: float, jitter: float, latency: float,
+    ) -> None:
+        """Record one tick (hot path: no validation, no allocation).
+
+        t : time.monotonic() of the tick [s]; also decides when to flush
+        imu : the IMU sample of this tick; gyro_counts, acc_counts: its raw (3,) counts
+        pose : the Vicon pose used this tick, or None (vicon_valid False, NaN values)
+        estimate, reference : None before they exist (NaN values)
+        sticks, ctrl_mask, sent : the command, its ctrl mask, whether it was written
+        state : supervisor state as an int; compute_time, jitter, latency [s]
+        Values that do not fit (wrong shape, out of the column's range) skip the row
+        and count in :attr:`bad_rows`; appending after close is ignored.
+        """
+        i = self._n
+        c = self._cols
+        try:
+            c["t"][i] = t
+            c["imu_t"][i] = imu.t
+            c["imu_counter"][i] = imu.counter
+            c["gyro_counts"][i] = gyro_counts
+            c["acc_counts"][i] = acc_counts
+            c["gyro"][i] = imu.gyro
+            c["acc"][i] = imu.acc
+            self._put_pose(i, pose)
+            self._put_estimate(i, estimate)
+            if reference is None:
+                c["ref_position"][i] = c["ref_velocity"][i] = c["ref_yaw"][i] = np.nan
+            else:
+                c["ref_position"][i] = reference.position
+                c["ref_velocity"][i] = reference.velocity
+                c["ref_yaw"][i] = reference.yaw
+            c["cmd_pitch"][i] = sticks.pitch
+            c["cmd_roll"][i] = sticks.roll
+            c["cmd_yaw"][i] = sticks.yaw
+            c["cmd_thrust"][i] = sticks.thrust
+            c["cmd_mask"][i] = ctrl_mask
+            c["cmd_sent"][i] = sent
+            c["state"][i] = state
+            c["compute_time"][i] = compute_time
+            c["jitter"][i] = jitter
+            c["latency"][i] = latency
+        except (ValueError, TypeError, OverflowError, IndexError):
+            self.bad_rows += 1  # IndexError: the buffer is gone after close()
+            return
+        self._n = i + 1
+        if self._n == self._capacity or t >= self._flush_due:
+            self.flush(t)
+
+    def _put_pose(self, i: int, pose: Pose | None) -> None:
+        c = self._cols
+        if pose is None:
+            c["vicon_valid"][i] = False
+            c["vicon_t"][i] = c["vicon_position"][i] = c["vicon_quaternion"][i] = np.nan
+        else:
+            c["vicon_valid"][i] = True
+            c["vicon_t"][i] = pose.t
+            c["vicon_position"][i] = pose.position
+            c["vicon_quaternion"][i] = pose.quaternion
+
+    def _put_estimate(self, i: int, est: StateEstimate | None) -> None:
+        c = self._cols
+        if est is None:
+            for name in _EST_FIELDS:
+                c[name][i] = np.nan
+        else:
+            c["est_position"][i] = est.position
+            c["est_quaternion"][i] = est.quaternion
+            c["est_velocity_body"][i] = est.velocity_body
+            c["est_omega"][i] = est.omega
+            c["est_gyro_bias"][i] = est.gyro_bias
+            c["est_acc_bias"][i] = est.acc_bias
+            c["est_covariance_diag"][i] = est.covariance_diag
+
+    def flush(self, t: float | None = None) -> None:
+        """Write the buffered rows, then the new row count; the file is loadable after.
+
+        t : the current monotonic time [s] (default time.monotonic()); the next
+            automatic flush is due ``flush_interval_s`` after it.
+        A write error is logged and counted (:attr:`write_errors`,
+        :attr:`rows_dropped`), never raised.
+        """
+        self._flush_due = (time.monotonic() if t is None else t) + self._interval
+        n = self._n
+        if n == 0 or self._fd < 0:
+            return
+        self._n = 0
+        size = RECORD_DTYPE.itemsize
+        try:
+            _pwrite_all(self._fd, self._bytes[: n * size].data,
+                        _HEADER_LEN + self._on_disk * size)
+            os.pwrite(self._fd, _count_field(self._on_disk + n), _COUNT_OFFSET)
+        except OSError as exc:
+            self.write_errors += 1
+            self.rows_dropped += n
+            log.warning("flight log write failed", path=str(self.path), rows_lost=n,
+                        error=str(exc))
+            return
+        self._on_disk += n
+
+    def close(self) -> None:
+        """Flush, fsync and close the file, add end time and counters to meta.json.
+
+        Idempotent. Errors are logged, not raised (close runs while landing or
+        unwinding from another error).
+        """
+        if self._fd < 0:
+            return
+        self.flush()
+        try:
+            os.fsync(self._fd)
+        except OSError as exc:
+            log.warning("flight log fsync failed", path=str(self.path), error=str(exc))
+        os.close(self._fd)
+        self._fd = -1
+        self._buf = self._buf[:0]  # later appends hit IndexError and are counted, not written
+        self._cols = _columns(self._buf)
+        self.meta.update(
+            end_time=dt.datetime.now(dt.UTC).isoformat(), end_monotonic=time.monotonic(),
+            rows=self._on_disk, rows_dropped=self.rows_dropped, bad_rows=self.bad_rows,
+            write_errors=self.write_errors,
+        )
+        try:
+            _write_json(self.directory / META_FILE, self.meta)
+        except OSError as exc:
+            log.warning("flight log meta.json not updated", path=str(self.directory),
+                        error=str(exc))
+
+    def __enter__(self) -> FlightRecorder:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+_EST_FIELDS = tuple(name for name, *_ in _SCHEMA if name.startswith("est_"))
+
+
+def read_flight(path: str | Path) -> tuple[npt.NDArray[np.void], dict[str, Any], str]:
+    """Read a flight log: ``(rows as RECORD_DTYPE, meta dict, config YAML text)``.
+
+    path : the flight directory or its flight.npy. Works on the log of a flight
+    still running or killed (rows up to the last flush). Raises GroundStationError
+    if the files are missing, unreadable or of another schema version.
+    """
+    p = Path(path)
+    directory = p if p.is_dir() else p.parent
+    try:
+        flat = np.load(directory / FLIGHT_FILE)
+        meta = json.loads((directory / META_FILE).read_text(encoding="utf-8"))
+        config = (directory / CONFIG_FILE).read_text(encoding="utf-8")
+    except (OSError, ValueError) as exc:
+        raise GroundStationError(f"{directory}: not a readable flight log: {exc}") from exc
+    if flat.dtype != FLAT_DTYPE:
+        raise GroundStationError(
+            f"{directory}: flight log schema {meta.get('schema_version')!r} is not "
+            f"this version's ({SCHEMA_VERSION})"
+        )
+    return flat.view(RECORD_DTYPE), meta, config
+
+
+def export_csv(path: str | Path, out_csv: str | Path) -> int:
+    """Write a flight log as CSV, one column per :data:`FLAT_DTYPE` field; return the row count.
+
+    The header line names the columns (``t,imu_t,...,est_position_x,...``); floats
+    are written with shortest round-trip precision, bools as 0/1, missing values
+    as ``nan``. ``np.genfromtxt(out_csv, delimiter=",", names=True)`` reads it back.
+    Raises GroundStationError if the log cannot be read or the CSV written.
+    """
+    data, _, _ = read_flight(path)
+    flat = data.view(FLAT_DTYPE)
+    names = FLAT_DTYPE.names or ()
+    fmt = ["%s" if FLAT_DTYPE[n].kind == "f" else "%d" for n in names]
+    try:
+        np.savetxt(out_csv, flat, fmt=fmt, delimiter=",", header=",".join(names), comments="")
+    except OSError as exc:
+        raise GroundStationError(f"cannot write {out_csv}: {exc}") from exc
+    return len(flat)

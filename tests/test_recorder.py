@@ -1,0 +1,276 @@
+"""Flight recorder: values round-trip, the file loads after every flush and after SIGKILL,
+CSV export, metadata. Expected values are the inputs themselves (seeded random ticks),
+compared field by field through independent readers (np.load, np.genfromtxt, json)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from groundstation import __version__
+from groundstation.errors import GroundStationError
+from groundstation.loop.recorder import (
+    COLUMN_UNITS,
+    FLAT_DTYPE,
+    RECORD_DTYPE,
+    FlightRecorder,
+    export_csv,
+    read_flight,
+)
+from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
+
+CONFIG = "serial:\n  port: /dev/ttyUSB0\n"
+STATES = ["PREFLIGHT", "TAKEOFF", "TRACK"]
+
+
+def make_tick(rng: np.random.Generator, k: int) -> dict[str, Any]:
+    """Random append() arguments for tick k at 100 Hz; every third tick has no pose."""
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    return dict(
+        t=100.0 + 0.01 * k,
+        imu=ImuSample(100.0 + 0.01 * k - 0.003, rng.normal(size=3), rng.normal(size=3),
+                      int(rng.integers(0, 65536))),
+        gyro_counts=tuple(int(v) for v in rng.integers(0, 4096, 3)),
+        acc_counts=tuple(int(v) for v in rng.integers(0, 4096, 3)),
+        pose=None if k % 3 == 0 else Pose(99.99 + 0.01 * k, rng.normal(size=3), q, k),
+        estimate=StateEstimate(100.0 + 0.01 * k, *(rng.normal(size=n) for n in (3, 4, 3, 3, 3, 3)),
+                               rng.random(16)),
+        reference=Reference(0.01 * k, rng.normal(size=3), rng.normal(size=3), yaw=rng.normal()),
+        sticks=Sticks(*(int(v) for v in rng.integers(-2048, 2048, 3)),
+                      int(rng.integers(0, 4097))),
+        ctrl_mask=int(rng.integers(0, 16)), sent=bool(k % 2), state=k % 3,
+        compute_time=rng.random() * 1e-3, jitter=rng.normal() * 1e-4, latency=rng.random() * 1e-2,
+    )
+
+
+def expected_row(a: dict[str, Any]) -> dict[str, Any]:
+    """The record fields append() must store for the arguments ``a``."""
+    pose, est, ref, sticks = a["pose"], a["estimate"], a["reference"], a["sticks"]
+    nan3, nan4 = np.full(3, np.nan), np.full(4, np.nan)
+    return {
+        "t": a["t"], "imu_t": a["imu"].t, "imu_counter": a["imu"].counter,
+        "gyro_counts": a["gyro_counts"], "acc_counts": a["acc_counts"],
+        "gyro": a["imu"].gyro, "acc": a["imu"].acc,
+        "vicon_valid": pose is not None,
+        "vicon_t": np.nan if pose is None else pose.t,
+        "vicon_position": nan3 if pose is None else pose.position,
+        "vicon_quaternion": nan4 if pose is None else pose.quaternion,
+        "est_position": est.position, "est_quaternion": est.quaternion,
+        "est_velocity_body": est.velocity_body, "est_omega": est.omega,
+        "est_gyro_bias": est.gyro_bias, "est_acc_bias": est.acc_bias,
+        "est_covariance_diag": est.covariance_diag,
+        "ref_position": ref.position, "ref_velocity": ref.velocity, "ref_yaw": ref.yaw,
+        "cmd_pitch": sticks.pitch, "cmd_roll": sticks.roll, "cmd_yaw": sticks.yaw,
+        "cmd_thrust": sticks.thrust, "cmd_mask": a["ctrl_mask"], "cmd_sent": a["sent"],
+        "state": a["state"], "compute_time": a["compute_time"], "jitter": a["jitter"],
+        "latency": a["latency"],
+    }
+
+
+def assert_rows(data: np.ndarray, ticks: list[dict[str, Any]]) -> None:
+    assert data.dtype == RECORD_DTYPE
+    assert len(data) == len(ticks)
+    for row, args in zip(data, ticks, strict=True):
+        for name, value in expected_row(args).items():
+            np.testing.assert_array_equal(row[name], value, err_msg=name)  # NaN == NaN here
+
+
+def test_round_trip_every_field(tmp_path: Path) -> None:
+    rng = np.random.default_rng(1)
+    ticks = [make_tick(rng, k) for k in range(250)]
+    # capacity 64 < 100 rows per flush interval: exercises flush-when-full and by-time
+    with FlightRecorder.create(tmp_path, CONFIG, capacity=64) as rec:
+        for args in ticks:
+            rec.append(**args)
+        assert rec.rows == 250
+    data, meta, config = read_flight(rec.directory)
+    assert_rows(data, ticks)
+    assert config == CONFIG
+    assert meta["rows"] == 250 and meta["bad_rows"] == 0 and meta["rows_dropped"] == 0
+
+
+def test_missing_estimate_and_reference_are_nan(tmp_path: Path) -> None:
+    args = make_tick(np.random.default_rng(2), 0)  # k = 0: no pose either
+    args.update(estimate=None, reference=None)
+    with FlightRecorder.create(tmp_path, CONFIG) as rec:
+        rec.append(**args)
+    row = read_flight(rec.directory)[0][0]
+    assert not row["vicon_valid"]
+    for name in ("vicon_position", "est_position", "est_covariance_diag", "ref_velocity",
+                 "ref_yaw", "vicon_t"):
+        assert np.all(np.isnan(row[name])), name
+
+
+def test_np_load_works_after_every_flush(tmp_path: Path) -> None:
+    rng = np.random.default_rng(3)
+    ticks = [make_tick(rng, k) for k in range(40)]
+    with FlightRecorder.create(tmp_path, CONFIG, flush_interval_s=1e9) as rec:
+        assert np.load(rec.path).shape == (0,)  # loadable before the first row
+        rec.append(**ticks[0])  # the first row is flushed at once
+        for k, args in enumerate(ticks[1:], start=2):
+            rec.append(**args)
+            if k % 7 == 0:
+                rec.flush()
+                on_disk = np.load(rec.path)
+                assert on_disk.dtype == FLAT_DTYPE  # one scalar column each (pandas-ready)
+                assert_rows(on_disk.view(RECORD_DTYPE), ticks[:k])
+        assert len(np.load(rec.path)) == 35  # 5 rows appended since the last flush...
+    assert len(np.load(rec.path)) == 40  # ...written by close()
+
+
+def test_automatic_flush_keeps_at_most_one_second_in_memory(tmp_path: Path) -> None:
+    rng = np.random.default_rng(4)
+    with FlightRecorder.create(tmp_path, CONFIG, flush_interval_s=1.0) as rec:
+        for k in range(350):
+            rec.append(**make_tick(rng, k))  # t advances 10 ms per tick
+            on_disk = len(np.load(rec.path))
+            # at 100 Hz, 1 s is 100 rows: never more than 100 rows only in memory
+            assert k + 1 - 100 <= on_disk <= k + 1
+        assert len(np.load(rec.path)) == 301  # flushes at ticks 0, 100, 200, 300
+
+
+_KILLED_WRITER = textwrap.dedent("""
+    import sys
+    import numpy as np
+    from groundstation.loop.recorder import FlightRecorder
+    sys.path.insert(0, sys.argv[2])
+    from test_recorder import CONFIG, make_tick
+    rng = np.random.default_rng(5)
+    rec = FlightRecorder.create(sys.argv[1], CONFIG, flush_interval_s=1e9)
+    for k in range(120):
+        rec.append(**make_tick(rng, k))
+        if k == 99:
+            rec.flush()
+    print(rec.directory, flush=True)
+    sys.stdin.read()  # wait to be killed
+""")
+
+
+def test_sigkill_leaves_a_loadable_file_with_the_flushed_rows(tmp_path: Path) -> None:
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _KILLED_WRITER, str(tmp_path), str(Path(__file__).parent)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+    )
+    try:
+        assert proc.stdout is not None
+        directory = Path(proc.stdout.readline().strip())
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate(timeout=10)
+    assert proc.returncode == -signal.SIGKILL
+    rng = np.random.default_rng(5)
+    ticks = [make_tick(rng, k) for k in range(120)]
+    data, meta, config = read_flight(directory)
+    assert_rows(data, ticks[:100])  # rows 100..119 were never flushed
+    assert config == CONFIG and "end_time" not in meta  # never closed
+
+
+def test_csv_export_reads_back_with_genfromtxt(tmp_path: Path) -> None:
+    rng = np.random.default_rng(6)
+    ticks = [make_tick(rng, k) for k in range(30)]
+    with FlightRecorder.create(tmp_path, CONFIG) as rec:
+        for args in ticks:
+            rec.append(**args)
+    out = tmp_path / "flight.csv"
+    assert export_csv(rec.directory, out) == 30
+    csv = np.genfromtxt(out, delimiter=",", names=True)
+    assert csv.dtype.names == FLAT_DTYPE.names
+    header = out.read_text().splitlines()[0].split(",")
+    assert header[:4] == ["t", "imu_t", "imu_counter", "gyro_counts_x"]
+    flat = np.load(rec.path)
+    for name in FLAT_DTYPE.names or ():
+        np.testing.assert_array_equal(csv[name], flat[name].astype(float), err_msg=name)
+    # a vector field flattens x, y, z in order: compare against the inputs themselves
+    np.testing.assert_array_equal(
+        np.column_stack([csv["est_position_x"], csv["est_position_y"], csv["est_position_z"]]),
+        [a["estimate"].position for a in ticks])
+    np.testing.assert_array_equal(csv["est_covariance_diag_baz"],
+                                  [a["estimate"].covariance_diag[15] for a in ticks])
+
+
+def test_meta_and_config_files(tmp_path: Path) -> None:
+    before = time.monotonic()
+    with FlightRecorder.create(tmp_path / "logs", CONFIG, {"supervisor_states": STATES}) as rec:
+        meta_open = json.loads((rec.directory / "meta.json").read_text())
+        assert (rec.directory / "config.yaml").read_text() == CONFIG
+    assert rec.directory.parent == tmp_path / "logs"
+    start = dt.datetime.fromisoformat(meta_open["start_time"])
+    assert start.utcoffset() == dt.timedelta(0)
+    assert rec.directory.name == start.strftime("%Y%m%dT%H%M%SZ")
+    assert before <= meta_open["start_monotonic"] <= time.monotonic()
+    assert meta_open["version"] == __version__
+    assert meta_open["supervisor_states"] == STATES
+    assert set(meta_open["units"]) == set(FLAT_DTYPE.names or ())
+    assert meta_open["units"]["est_covariance_diag_px"] == "m^2"
+    assert meta_open["units"]["est_covariance_diag_bgz"] == "(rad/s)^2"
+    assert meta_open["units"]["gyro_x"] == "rad/s"
+    meta = read_flight(rec.directory)[1]
+    assert meta["rows"] == 0 and meta["end_monotonic"] >= meta["start_monotonic"]
+    assert COLUMN_UNITS["latency"] == "s"
+
+
+def test_two_flights_in_one_second_get_their_own_directories(tmp_path: Path) -> None:
+    with FlightRecorder.create(tmp_path, CONFIG) as a, FlightRecorder.create(tmp_path, CONFIG) as b:
+        assert a.directory != b.directory
+    assert len(list(tmp_path.iterdir())) == 2
+
+
+def test_bad_values_skip_the_row_and_close_is_idempotent(tmp_path: Path) -> None:
+    rng = np.random.default_rng(7)
+    good = make_tick(rng, 1)
+    rec = FlightRecorder.create(tmp_path, CONFIG)
+    rec.append(**{**good, "gyro_counts": (1, 2)})  # wrong shape
+    rec.append(**{**good, "sticks": Sticks(thrust=70000)})  # beyond int16
+    rec.append(**good)
+    assert rec.bad_rows == 2 and rec.rows == 1
+    rec.close()
+    rec.close()
+    assert rec.closed
+    rec.append(**good)  # after close: counted, not written, no exception
+    assert rec.bad_rows == 3
+    assert_rows(read_flight(rec.directory)[0], [good])
+
+
+def test_write_failure_is_counted_not_raised(tmp_path: Path) -> None:
+    rng = np.random.default_rng(8)
+    rec = FlightRecorder.create(tmp_path, CONFIG, flush_interval_s=1e9)
+    rec.append(**make_tick(rng, 0))  # flushed at once
+    full = os.open("/dev/full", os.O_WRONLY)  # a real device whose writes fail with ENOSPC
+    try:
+        os.dup2(full, rec._fd)  # the recorder's own descriptor now points at a full disk
+    finally:
+        os.close(full)
+    rec.append(**make_tick(rng, 1))
+    rec.flush()
+    assert rec.write_errors == 1 and rec.rows_dropped == 1
+    rec.close()  # fsync on /dev/full fails too: logged, not raised
+    assert rec.closed
+
+
+def test_read_flight_rejects_what_is_not_a_flight_log(tmp_path: Path) -> None:
+    with pytest.raises(GroundStationError, match="not a readable flight log"):
+        read_flight(tmp_path)
+    np.save(tmp_path / "flight.npy", np.zeros(3))
+    (tmp_path / "meta.json").write_text("{}")
+    (tmp_path / "config.yaml").write_text("")
+    with pytest.raises(GroundStationError, match="schema"):
+        read_flight(tmp_path / "flight.npy")
+
+
+def test_create_reports_an_unwritable_log_dir(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    with pytest.raises(GroundStationError, match="cannot start a flight log"):
+        FlightRecorder.create(blocker / "logs", CONFIG)
