@@ -1,0 +1,43 @@
+"""The bundled virtual lab: a simulated AscTec X-3D and a simulated Vicon Tracker.
+
+* :class:`VirtualLab`: plant, firmware, radio and Vicon on a simulated clock,
+  exchanging bytes (or messages) in-process: deterministic, faster than real time.
+* :func:`run_sim_device`: the same lab in real time on a pseudo-terminal and UDP
+  (``gs sim-device``); :class:`SimDeviceThread` runs it in a background thread.
+* :class:`LabParams` and its parts: plain parameters, or ``LabParams.from_config``.
+
+Units SI, frames NED/FRD, quaternions scalar first (see :mod:`groundstation`).
+"""
+
+from sim_device.lab import LabStats, VirtualLab
+from sim_device.params import (
+    FaultParams,
+    ImuParams,
+    LabParams,
+    LinkParams,
+    PilotParams,
+    PlantParams,
+    ViconSimParams,
+)
+from sim_device.realtime import SimDeviceInfo, SimDeviceResult, SimDeviceThread, run_sim_device
+from sim_device.truth import TruthLog, TruthState
+from sim_device.vicon import ViconDatagram
+
+__all__ = [
+    "FaultParams",
+    "ImuParams",
+    "LabParams",
+    "LabStats",
+    "LinkParams",
+    "PilotParams",
+    "PlantParams",
+    "SimDeviceInfo",
+    "SimDeviceResult",
+    "SimDeviceThread",
+    "TruthLog",
+    "TruthState",
+    "ViconDatagram",
+    "ViconSimParams",
+    "VirtualLab",
+    "run_sim_device",
+]

@@ -1,0 +1,325 @@
+"""Plain parameters of the virtual lab, validated once at construction.
+
+The simulation classes take these frozen dataclasses, not the pydantic
+configuration, so they can be built in a test with keywords only.
+:meth:`LabParams.from_config` maps a :class:`~groundstation.config.GroundStationConfig`
+onto them (its ``sim`` section, the vehicle model, the serial link and the
+Vicon stream); fields that have no configuration key yet keep the defaults
+below, each of which names its source.
+
+Units are SI; frames NED (earth) and FRD (body); quaternions scalar first.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from groundstation.errors import ConfigError
+
+if TYPE_CHECKING:
+    from groundstation.config import GroundStationConfig
+
+Vec3 = tuple[float, float, float]
+LossEncoding = Literal["missing", "zero", "held-identity"]
+LOSS_ENCODINGS: tuple[LossEncoding, ...] = ("missing", "zero", "held-identity")
+
+_EQ37: tuple[float, ...] = (2.073e-10, -1.143e-6, -1.054e-3, -0.903)
+
+
+def _require(ok: bool, name: str, value: object, reason: str) -> None:
+    """Raise ConfigError naming the parameter unless ``ok``."""
+    if not ok:
+        raise ConfigError(f"{name}: {value!r}: {reason}", [(name, value, reason)])
+
+
+def _finite(*values: float) -> bool:
+    return all(math.isfinite(v) for v in values)
+
+
+@dataclass(frozen=True, slots=True)
+class PlantParams:
+    """Rigid-body plant: thesis eq. 3.19-3.22 plus the dynamics Ch. 10.3/12 found missing.
+
+    mass : [kg]; g : [m/s^2] (eq. 3.8)
+    k_rate : (K_phi, K_theta, K_psi) body-rate set point per stick unit [rad/s per unit]
+    thrust_poly : eq. 3.7 coefficients (a3, a2, a1, a0): body-z lift [N] (negative = up)
+    inflow : induced-inflow constant I_i [N s/m] (eq. 3.9)
+    rate_tau : on-board rate loop as a first-order lag [s]; 0 = ideal (thesis model).
+        0.064 s gives the 0.14 s 10-90 % rise of Fig. 3.8 (rise = 2.2 tau).
+    thrust_tau : motor/rotor lag of the lift [s]; 0 = instantaneous. Thesis silent;
+        0.02 s is typical of ~10 cm brushless rotors.
+    thrust_scale : true lift / polynomial lift (0.9 = 10 % less lift than the model)
+    battery_droop : fraction of lift lost over ``battery_droop_time`` (Ch. 5.2), linear in time
+    battery_droop_time : [s]
+    initial_position : NED [m]; z = 0 is the floor
+    initial_yaw : heading [rad]
+    """
+
+    mass: float = 0.60
+    g: float = 9.82
+    k_rate: Vec3 = (1.1e-3, 1.1e-3, 1.1e-3)
+    thrust_poly: tuple[float, ...] = _EQ37
+    inflow: float = -0.423
+    rate_tau: float = 0.064
+    thrust_tau: float = 0.02
+    thrust_scale: float = 1.0
+    battery_droop: float = 0.03
+    battery_droop_time: float = 300.0
+    initial_position: Vec3 = (0.0, 0.0, 0.0)
+    initial_yaw: float = 0.0
+
+    def __post_init__(self) -> None:
+        _require(self.mass > 0 and self.g > 0, "plant.mass/g", (self.mass, self.g), "must be > 0")
+        _require(len(self.k_rate) == 3 and _finite(*self.k_rate), "plant.k_rate", self.k_rate,
+                 "three finite gains")
+        _require(len(self.thrust_poly) == 4 and _finite(*self.thrust_poly), "plant.thrust_poly",
+                 self.thrust_poly, "four finite coefficients (a3, a2, a1, a0)")
+        _require(self.rate_tau >= 0 and self.thrust_tau >= 0, "plant.rate_tau/thrust_tau",
+                 (self.rate_tau, self.thrust_tau), "must be >= 0")
+        _require(self.thrust_scale > 0, "plant.thrust_scale", self.thrust_scale, "must be > 0")
+        _require(0 <= self.battery_droop < 0.5 and self.battery_droop_time > 0,
+                 "plant.battery_droop", (self.battery_droop, self.battery_droop_time),
+                 "droop in [0, 0.5) over a positive time")
+        _require(len(self.initial_position) == 3 and self.initial_position[2] <= 0,
+                 "plant.initial_position", self.initial_position, "NED, z <= 0 (floor at 0)")
+
+
+@dataclass(frozen=True, slots=True)
+class ImuParams:
+    """On-board gyro/accelerometer as the DATA stream reports them (spec 3.3).
+
+    gyro_scale, acc_scale : Table 6.2 K [rad/s or m/s^2 per count] (what the ground
+        station assumes; the true scale differs by the scale error)
+    gyro_zero, acc_zero : zero offsets [counts]
+    gyro_variance, acc_variance : Table 6.3 white-noise variances [(rad/s)^2, (m/s^2)^2]
+    gyro_bias, acc_bias : constant biases, FRD [rad/s, m/s^2]
+    scale_error : each axis's true scale differs from nominal by a factor drawn
+        uniformly in [1 - e, 1 + e] (seeded)
+    acc_saturation : the physical accelerometer clips at +/- this [m/s^2] (Ch. 6.2)
+    gyro_saturation : physical gyro range [rad/s]; None = only the 12-bit ADC clips
+    pressure_noise : standard deviation of the raw pressure reading [Pa]
+    """
+
+    gyro_scale: Vec3 = (0.0144, 0.0143, 0.0127)
+    acc_scale: Vec3 = (0.0086, 0.0077, 0.0111)
+    gyro_zero: Vec3 = (2048.0, 2048.0, 2048.0)
+    acc_zero: Vec3 = (2048.0, 2048.0, 2048.0)
+    gyro_variance: Vec3 = (1.24e-4, 1.94e-4, 8.54e-4)
+    acc_variance: Vec3 = (4.60e-3, 2.62e-3, 3.54e-3)
+    gyro_bias: Vec3 = (0.01, -0.02, 0.005)
+    acc_bias: Vec3 = (0.05, -0.05, 0.1)
+    scale_error: float = 0.02
+    acc_saturation: float = 14.0
+    gyro_saturation: float | None = None
+    pressure_noise: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("gyro_scale", "acc_scale"):
+            v = getattr(self, name)
+            _require(len(v) == 3 and all(x != 0 for x in v) and _finite(*v), f"imu.{name}", v,
+                     "three finite non-zero scales")
+        for name in ("gyro_variance", "acc_variance"):
+            v = getattr(self, name)
+            _require(len(v) == 3 and all(x >= 0 for x in v), f"imu.{name}", v, "three >= 0")
+        _require(0 <= self.scale_error < 0.5, "imu.scale_error", self.scale_error, "in [0, 0.5)")
+        _require(self.acc_saturation > 0, "imu.acc_saturation", self.acc_saturation, "> 0")
+
+
+@dataclass(frozen=True, slots=True)
+class LinkParams:
+    """The serial link and the vehicle's firmware behaviour (spec sections 1-4).
+
+    baud : bits per second, 10 bits per byte (8N1); output is paced at this rate
+    crc_profile : spec section 2 CRC profile name
+    command_delay : transport delay of the ground -> vehicle link [s] (radio, firmware)
+    watchdog : no valid COMMAND for this long hands every channel to the pilot [s]
+    battery_mv : STATUS battery voltage with a full battery [mV]; droops with the lift
+    """
+
+    baud: int = 57600
+    crc_profile: str = "asctec"
+    command_delay: float = 0.02
+    watchdog: float = 0.100
+    battery_mv: int = 11800
+
+    def __post_init__(self) -> None:
+        _require(self.baud > 0, "link.baud", self.baud, "must be > 0")
+        _require(self.command_delay >= 0 and self.watchdog > 0, "link.command_delay/watchdog",
+                 (self.command_delay, self.watchdog), "delay >= 0, watchdog > 0")
+
+
+@dataclass(frozen=True, slots=True)
+class FaultParams:
+    """Link faults, all off by default.
+
+    corruption_rate : probability per byte of one flipped bit, both directions
+    drop_rate : probability per DATA frame that the radio loses it whole
+    stall_at, stall_duration : the DATA stream stops at this time for this long [s]
+    burst_period : hold DATA and release it every this many seconds (0 = off)
+    data_delay : extra constant delay of every DATA frame [s]
+    """
+
+    corruption_rate: float = 0.0
+    drop_rate: float = 0.0
+    stall_at: float | None = None
+    stall_duration: float = 0.0
+    burst_period: float = 0.0
+    data_delay: float = 0.0
+
+    def __post_init__(self) -> None:
+        _require(0 <= self.corruption_rate <= 1 and 0 <= self.drop_rate <= 1, "faults.rates",
+                 (self.corruption_rate, self.drop_rate), "probabilities in [0, 1]")
+        _require(self.stall_duration >= 0 and self.burst_period >= 0 and self.data_delay >= 0,
+                 "faults.times", (self.stall_duration, self.burst_period, self.data_delay),
+                 "must be >= 0")
+
+
+@dataclass(frozen=True, slots=True)
+class ViconSimParams:
+    """The virtual Vicon Tracker (``spec/vicon-udp.md``).
+
+    rate_hz : datagrams per second (any rate; the thesis used 100, 10 and 1)
+    latency : delay from the pose instant to delivery [s]
+    noise : add Table 6.1 noise (variances below)
+    position_variance : (3,) NED [m^2]; quaternion_variance : (4,) q0..q3 [-]
+    loss_encoding : how lost tracking is sent (spec "lost tracking" 1-3)
+    outages : (start, duration) [s] windows without tracking
+    tilt_limit_deg : tracking is lost beyond this tilt from level [deg]
+    volume_x, volume_y, volume_z : tracked volume, NED [m] (Table B.1: +/-1.5 m,
+        0..2 m height; z up to +0.05 so the vehicle on the floor is tracked)
+    object_name : the object's name in the datagrams (at most 23 bytes)
+    pad_to : datagram length (Tracker's data block size), None = unpadded
+    world_to_ned, body_to_object : (3, 3) rotations as nested tuples (spec; 180 deg about x)
+    first_frame : Tracker frame number of the first datagram
+    """
+
+    rate_hz: float = 100.0
+    latency: float = 0.005
+    noise: bool = True
+    position_variance: Vec3 = (4.16e-7, 3.28e-9, 2.91e-7)
+    quaternion_variance: tuple[float, float, float, float] = (1.09e-9, 5.17e-6, 9.74e-6, 3.62e-6)
+    loss_encoding: LossEncoding = "held-identity"
+    outages: tuple[tuple[float, float], ...] = ()
+    tilt_limit_deg: float = 60.0
+    volume_x: tuple[float, float] = (-1.5, 1.5)
+    volume_y: tuple[float, float] = (-1.5, 1.5)
+    volume_z: tuple[float, float] = (-2.0, 0.05)
+    object_name: str = "X3D"
+    pad_to: int | None = 1024
+    world_to_ned: tuple[Vec3, Vec3, Vec3] = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+    body_to_object: tuple[Vec3, Vec3, Vec3] = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+    first_frame: int = 1
+
+    def __post_init__(self) -> None:
+        _require(self.rate_hz > 0 and self.latency >= 0, "vicon.rate_hz/latency",
+                 (self.rate_hz, self.latency), "rate > 0, latency >= 0")
+        _require(self.loss_encoding in LOSS_ENCODINGS, "vicon.loss_encoding", self.loss_encoding,
+                 f"one of {LOSS_ENCODINGS}")
+        _require(all(d >= 0 for _, d in self.outages), "vicon.outages", self.outages,
+                 "(start, duration) with duration >= 0")
+        for name in ("volume_x", "volume_y", "volume_z"):
+            lo, hi = getattr(self, name)
+            _require(lo < hi, f"vicon.{name}", (lo, hi), "(min, max) with min < max")
+
+
+@dataclass(frozen=True, slots=True)
+class PilotParams:
+    """The scripted RC pilot: neutral rate sticks, a held thrust stick.
+
+    thrust : thrust stick the pilot holds (0 = motors off, vehicle on the floor)
+    serial_enable : the RC serial-enable switch (commands apply only when on)
+    rc_link : the RC link is valid (STATUS flag bit 2)
+    """
+
+    thrust: int = 0
+    serial_enable: bool = True
+    rc_link: bool = True
+
+    def __post_init__(self) -> None:
+        _require(0 <= self.thrust <= 4096, "pilot.thrust", self.thrust, "in 0..4096")
+
+
+@dataclass(frozen=True, slots=True)
+class LabParams:
+    """Everything the virtual lab needs.
+
+    dt : fixed plant step [s] (2 ms: fine for the rate-loop and motor lags)
+    seed : seeds every random draw (noise, scale errors, faults); same seed, same run
+    truth_period : ground-truth log interval [s] (a multiple of dt is exact)
+    """
+
+    dt: float = 0.002
+    seed: int = 1
+    truth_period: float = 0.01
+    plant: PlantParams = field(default_factory=PlantParams)
+    imu: ImuParams = field(default_factory=ImuParams)
+    link: LinkParams = field(default_factory=LinkParams)
+    faults: FaultParams = field(default_factory=FaultParams)
+    vicon: ViconSimParams = field(default_factory=ViconSimParams)
+    pilot: PilotParams = field(default_factory=PilotParams)
+
+    def __post_init__(self) -> None:
+        _require(0 < self.dt <= 0.01, "dt", self.dt, "in (0, 0.01] s")
+        _require(self.truth_period > 0, "truth_period", self.truth_period, "must be > 0")
+
+    @classmethod
+    def from_config(cls, config: GroundStationConfig) -> LabParams:
+        """Parameters from a validated configuration (``sim`` may be absent: defaults)."""
+        from groundstation.config import SimConfig
+
+        sim = config.sim if config.sim is not None else SimConfig()
+        veh = config.vehicle
+        v3 = _vec3
+        plant = PlantParams(
+            mass=veh.mass_kg, g=veh.gravity, k_rate=v3(veh.k_rate),
+            thrust_poly=tuple(veh.thrust_poly), inflow=veh.induced_inflow,
+            rate_tau=sim.rate_loop_tau_s, thrust_scale=sim.thrust_scale,
+            battery_droop=sim.battery_droop, battery_droop_time=sim.battery_droop_time_s,
+            initial_position=v3(sim.initial_position),
+            initial_yaw=math.radians(sim.initial_yaw_deg),
+        )
+        imu = ImuParams(
+            gyro_scale=v3(veh.gyro_scale), acc_scale=v3(veh.acc_scale),
+            gyro_zero=v3(veh.gyro_zero), acc_zero=v3(veh.acc_zero),
+            gyro_variance=v3(veh.gyro_variance), acc_variance=v3(veh.acc_variance),
+            gyro_bias=v3(sim.gyro_bias), acc_bias=v3(sim.acc_bias),
+            scale_error=sim.scale_error, acc_saturation=veh.acc_saturation,
+        )
+        link = LinkParams(baud=config.serial.baud, crc_profile=config.serial.crc_profile,
+                          command_delay=sim.command_delay_s, battery_mv=sim.battery_mv)
+        f = sim.faults
+        faults = FaultParams(corruption_rate=f.corruption_rate, drop_rate=f.drop_rate,
+                             stall_at=f.stall_at_s, stall_duration=f.stall_duration_s,
+                             burst_period=f.burst_delay_s)
+        sv, vc = sim.vicon, config.vicon
+        vicon = ViconSimParams(
+            rate_hz=sv.rate_hz, latency=sv.latency_s, noise=sv.noise,
+            position_variance=v3(veh.vicon_position_variance),
+            quaternion_variance=_vec4(veh.vicon_quaternion_variance),
+            loss_encoding=sv.loss_encoding,
+            outages=tuple((float(start), float(length)) for start, length in sv.outages),
+            tilt_limit_deg=sv.tilt_limit_deg, object_name=vc.object_name, pad_to=sv.pad_to,
+            world_to_ned=_mat3(vc.world_to_ned.as_matrix()),
+            body_to_object=_mat3(vc.body_to_object.as_matrix()),
+        )
+        pilot = PilotParams(thrust=sim.pilot_thrust, serial_enable=sim.serial_enable,
+                            rc_link=sim.rc_link)
+        return cls(dt=sim.dt_s, seed=sim.seed, plant=plant, imu=imu, link=link, faults=faults,
+                   vicon=vicon, pilot=pilot)
+
+
+def _vec3(values: list[float] | tuple[float, ...]) -> Vec3:
+    return (float(values[0]), float(values[1]), float(values[2]))
+
+
+def _vec4(values: list[float]) -> tuple[float, float, float, float]:
+    return (float(values[0]), float(values[1]), float(values[2]), float(values[3]))
+
+
+def _mat3(m: npt.NDArray[np.float64]) -> tuple[Vec3, Vec3, Vec3]:
+    return (_vec3(m[0].tolist()), _vec3(m[1].tolist()), _vec3(m[2].tolist()))

@@ -1,0 +1,301 @@
+"""The virtual lab in real time: the X-3D on a pseudo-terminal, the Vicon on UDP.
+
+:func:`run_sim_device` is what ``gs sim-device --config config/sim.yaml`` runs.
+It builds a :class:`~sim_device.lab.VirtualLab` from the configuration and keeps
+its simulated clock on the wall clock (``time.monotonic``), so the in-process
+and the real-time modes share one plant, one firmware and one Vicon.
+
+* **Serial.** ``os.openpty()``; the ground station opens the *slave* path (printed
+  and passed to ``on_ready``) like a serial port, e.g. ``serial.Serial(path)``.
+  Both ends are raw (no echo, no newline translation). The lab's own slave fd
+  stays open so the master never reads a hang-up before a client connects. If
+  the client stops reading, the backlog is flushed rather than replayed later.
+* **Vicon.** Datagrams go to ``(sim.vicon.target_address, vicon.port)`` over UDP.
+* **Clock.** Every ``tick`` (default one plant step) the lab advances to the wall
+  time, incoming bytes are written at that time, and output is sent when its
+  simulated delivery time has come; deadlines advance by the tick (no drift) and
+  late ticks are counted as overruns.
+* **Stop.** When ``stop`` is set, after ``duration``, or on SIGINT/SIGTERM (handlers
+  are installed only when running in the main thread); the ground truth is written
+  as ``.npz`` (:mod:`sim_device.truth`) on every way out.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import os
+import select
+import signal
+import socket
+import struct
+import termios
+import threading
+import time
+import tty
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from types import FrameType
+from typing import TYPE_CHECKING
+
+from sim_device.lab import LabStats, VirtualLab
+
+if TYPE_CHECKING:
+    from groundstation.config import GroundStationConfig
+
+BACKLOG_LIMIT = 2048
+"""Unread bytes on the pty beyond which the client is taken as not reading [bytes]."""
+
+
+@dataclass(frozen=True, slots=True)
+class SimDeviceInfo:
+    """Where the running virtual lab can be reached.
+
+    pty_path : the serial port for the ground station (pty slave path)
+    vicon_target : (address, port) the Vicon datagrams are sent to
+    truth_file : where the ground truth will be written on exit (.npz)
+    """
+
+    pty_path: str
+    vicon_target: tuple[str, int]
+    truth_file: Path
+
+
+@dataclass(frozen=True, slots=True)
+class SimDeviceResult:
+    """Summary of a real-time run.
+
+    wall_s, cpu_s : wall-clock and process CPU time of the run [s]
+    overruns : ticks that started more than one tick late
+    serial_dropped : DATA bytes discarded because the client was not reading
+    vicon_errors : datagrams the socket refused
+    """
+
+    info: SimDeviceInfo
+    stats: LabStats
+    wall_s: float
+    cpu_s: float
+    overruns: int
+    serial_dropped: int
+    vicon_errors: int
+
+    @property
+    def cpu_share(self) -> float:
+        """CPU time over wall time (1.0 = one core busy)."""
+        return self.cpu_s / self.wall_s if self.wall_s > 0 else 0.0
+
+
+def default_truth_path(config: GroundStationConfig) -> Path:
+    """``sim.truth_file`` if set, else ``<logging.flight_log_dir>/sim-truth-<UTC time>.npz``."""
+    if config.sim is not None and config.sim.truth_file is not None:
+        return Path(config.sim.truth_file)
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+    return Path(config.logging.flight_log_dir) / f"sim-truth-{stamp}.npz"
+
+
+class _Pty:
+    """A raw pty pair; the master side is non-blocking."""
+
+    def __init__(self) -> None:
+        self.master, self.slave = os.openpty()
+        try:
+            tty.setraw(self.master)
+            tty.setraw(self.slave)
+            os.set_blocking(self.master, False)
+            self.path = os.ttyname(self.slave)
+        except BaseException:
+            self.close()
+            raise
+        self.dropped = 0
+
+    def read(self) -> bytes:
+        """Everything the client has written so far (b"" if nothing)."""
+        parts = []
+        while True:
+            try:
+                chunk = os.read(self.master, 4096)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as exc:  # EIO: no client side open (cannot happen while we hold it)
+                if exc.errno != errno.EIO:
+                    raise
+                break
+            if not chunk:
+                break
+            parts.append(chunk)
+        return b"".join(parts)
+
+    def write(self, data: bytes) -> None:
+        """Send to the client; if it is not reading, discard the backlog instead of queueing."""
+        waiting = struct.unpack("i", fcntl.ioctl(self.slave, termios.FIONREAD, b"\0\0\0\0"))[0]
+        if waiting > BACKLOG_LIMIT:
+            termios.tcflush(self.slave, termios.TCIFLUSH)
+            self.dropped += waiting
+        try:
+            sent = os.write(self.master, data)
+        except BlockingIOError:
+            sent = 0
+        self.dropped += len(data) - sent
+
+    def close(self) -> None:
+        for fd in (self.master, self.slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+@contextlib.contextmanager
+def _stop_on_signals(stop: threading.Event) -> Iterator[None]:
+    """Set ``stop`` on SIGINT/SIGTERM while inside (main thread only; elsewhere a no-op)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+def run_sim_device(
+    config: GroundStationConfig,
+    stop: threading.Event | None = None,
+    *,
+    truth_file: str | Path | None = None,
+    on_ready: Callable[[SimDeviceInfo], None] | None = None,
+    announce: Callable[[str], None] | None = print,
+    duration: float | None = None,
+    tick: float | None = None,
+) -> SimDeviceResult:
+    """Run the virtual X-3D (pty) and virtual Vicon (UDP) in real time until stopped.
+
+    config : the whole configuration (``sim`` section, vehicle model, ``serial.baud``
+        and ``crc_profile``, ``vicon.port`` and ``object_name``; ``sim`` None = defaults)
+    stop : set it to stop (from another thread); SIGINT/SIGTERM also stop the run
+        when it runs in the main thread
+    truth_file : ground-truth path (.npz); default :func:`default_truth_path`
+    on_ready : called once with the pty path and UDP target before the clock starts
+    announce : where the human-readable lines go (None = silent)
+    duration : stop after this many wall seconds (None = until stopped)
+    tick : scheduler period [s] (default the plant step)
+
+    Returns a :class:`SimDeviceResult`; the truth file is written on every way out.
+    """
+    stop = stop if stop is not None else threading.Event()
+    lab = VirtualLab(config)
+    sim_vicon = config.sim.vicon.target_address if config.sim is not None else "127.0.0.1"
+    target = (sim_vicon, config.vicon.port)
+    info_path = Path(truth_file) if truth_file is not None else default_truth_path(config)
+    tick = lab.dt if tick is None else tick
+    say = announce if announce is not None else (lambda _line: None)
+    pty = _Pty()
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    counters = {"overruns": 0, "vicon_errors": 0}
+    wall0, cpu0 = time.monotonic(), time.process_time()
+    try:
+        info = SimDeviceInfo(pty.path, target, info_path.with_suffix(".npz"))
+        say(f"virtual X-3D on {pty.path} ({lab.params.link.baud} baud); "
+            f"virtual Vicon -> udp://{target[0]}:{target[1]} at {lab.params.vicon.rate_hz:g} Hz")
+        if on_ready is not None:
+            on_ready(info)
+        with _stop_on_signals(stop):
+            _loop(lab, pty, sock, target, stop, tick, duration, counters)
+    finally:
+        wall, cpu = time.monotonic() - wall0, time.process_time() - cpu0
+        sock.close()
+        pty.close()
+        saved = lab.truth_log.save(info_path)
+        say(f"ground truth ({len(lab.truth_log)} rows) written to {saved}")
+    return SimDeviceResult(info, lab.stats(), wall, cpu, counters["overruns"], pty.dropped,
+                           counters["vicon_errors"])
+
+
+def _loop(lab: VirtualLab, pty: _Pty, sock: socket.socket, target: tuple[str, int],
+          stop: threading.Event, tick: float, duration: float | None,
+          counters: dict[str, int]) -> None:
+    """The real-time loop: advance to the wall clock, exchange bytes, sleep to the next tick."""
+    start = time.monotonic()
+    deadline = tick
+    end = float("inf") if duration is None else duration
+    while not stop.is_set():
+        now = time.monotonic() - start
+        if now >= end:
+            break
+        for _, frame in lab.advance_to(now):
+            pty.write(frame)
+        for dgram in lab.vicon_datagrams():
+            try:
+                sock.sendto(dgram.data, target)
+            except OSError:
+                counters["vicon_errors"] += 1
+        incoming = pty.read()
+        if incoming:
+            lab.write(incoming)
+        if now > deadline + tick:
+            counters["overruns"] += 1
+            deadline = now
+        while deadline <= now:
+            deadline += tick
+        select.select([pty.master], [], [], max(0.0, min(deadline, end) - now))
+
+
+class SimDeviceThread:
+    """Run :func:`run_sim_device` in a background thread for a ``with`` block.
+
+    ``with SimDeviceThread(config) as dev:`` returns once the pty exists;
+    ``dev.info`` says where to connect. Leaving the block stops the run, joins the
+    thread (the truth file is then written), fills ``dev.result`` and re-raises
+    the run's error as RuntimeError, if there was one.
+    """
+
+    def __init__(self, config: GroundStationConfig, *, truth_file: str | Path | None = None,
+                 timeout: float = 5.0) -> None:
+        self._config = config
+        self._truth_file = truth_file
+        self._timeout = timeout
+        self._stop = threading.Event()
+        self._ready = threading.Event()
+        self._info: SimDeviceInfo | None = None
+        self.result: SimDeviceResult | None = None
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="sim-device", daemon=True)
+
+    @property
+    def info(self) -> SimDeviceInfo:
+        """Where to connect (available inside the ``with`` block)."""
+        if self._info is None:
+            raise RuntimeError("the virtual lab is not running")
+        return self._info
+
+    def _on_ready(self, info: SimDeviceInfo) -> None:
+        self._info = info
+        self._ready.set()
+
+    def _run(self) -> None:
+        try:
+            self.result = run_sim_device(self._config, self._stop, truth_file=self._truth_file,
+                                         on_ready=self._on_ready, announce=None)
+        except BaseException as exc:  # handed to the caller's thread in __exit__
+            self.error = exc
+        finally:
+            self._ready.set()
+
+    def __enter__(self) -> SimDeviceThread:
+        self._thread.start()
+        if not self._ready.wait(self._timeout) or self._info is None:
+            self.__exit__(None, None, None)
+            raise RuntimeError("the virtual lab did not start") from self.error
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self._stop.set()
+        self._thread.join(self._timeout)
+        if self.error is not None:
+            raise RuntimeError("the virtual lab failed") from self.error
