@@ -1,0 +1,224 @@
+"""LQR with a reference model (thesis Ch. 9), plus integral action and anti-windup.
+
+The control law is eq. 9.21 extended by integrators of the tracking error::
+
+    u = K_s x_s + K_i x_i + K_r x_r,        u = [omega_x, omega_y, omega_z, F_z]
+
+* ``x_s`` the reduced hover state ``[P, q1, q2, q3, v_body]`` (q0 dropped: it is
+  uncontrollable, eq. 4.18, so the pair would not be stabilisable), optionally
+  with the measured body rates appended when the design model includes the
+  rate-loop lag;
+* ``x_r`` the reference-model state: ``r = [x, y, z, q3]_ref`` for the constant
+  position model, ``[r(k); r(k-1)]`` for the constant velocity model (eq. 9.24),
+  whose previous sample carries the reference velocity forward. Like the thesis
+  (Ch. 9.2.1) the previous sample is not the raw one: it is ``r(k) - dt v`` with
+  ``v`` either the trajectory's own velocity (exact, the default) or a
+  first-order filter of the sample differences;
+* ``x_i`` integrated error ``x_i(k+1) = x_i(k) + dt (r - y)`` for the outputs
+  with a positive integral weight (beyond the thesis: zero steady-state error
+  under a thrust error, battery droop or a biased estimate). The integrators
+  hold while the output saturates and are clamped to ``integral_limit``.
+
+The gains are designed once, in ``__init__``, on the exact ZOH discretisation
+of the linear hover model at the loop period (:mod:`.lqr_design`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Literal
+
+import numpy as np
+
+from groundstation.control.base import fill_reduced_state, reference_outputs
+from groundstation.control.disturbance import DisturbanceObserver
+from groundstation.control.lqr_design import ReferenceKind, TrackingGains, design_tracking_lqr
+from groundstation.control.sticks import CommandLimits, StickParams
+from groundstation.errors import ControlError
+from groundstation.model import QuadrotorParams, hover_model_rate_lag, hover_model_reduced
+from groundstation.types import ControlOutput, Reference, StateEstimate
+
+DEFAULT_Q_ERROR = (8.0, 8.0, 20.0, 2.0)
+"""Q_e on the [x, y, z, q3] errors (eq. 9.18) [1/m^2, 1/m^2, 1/m^2, -]."""
+DEFAULT_R_INPUT = (4.0, 4.0, 4.0, 2.0)
+"""R on [omega_x, omega_y, omega_z, F_z] [1/(rad/s)^2, ..., 1/N^2]."""
+DEFAULT_DISTURBANCE_TAU = 1.0
+"""Time constant [s] of the constant-disturbance observer (:mod:`.disturbance`)."""
+
+H_OUTPUTS = (0, 1, 2, 5)
+"""Rows of the reduced state that are the controlled outputs x, y, z, q3 (eq. 9.15)."""
+
+
+def _diag(values: Sequence[float], n: int, name: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=float)
+    if arr.shape == (n,):
+        return np.diag(arr)
+    if arr.shape == (n, n):
+        return arr
+    raise ControlError(f"{name} must be {n} diagonal entries or {n}x{n}, found shape {arr.shape}")
+
+
+class LqrController:
+    """Discrete LQR tracking controller (see the module docstring).
+
+    params : vehicle model parameters (mass, g, inflow, rate gains, thrust map)
+    dt : loop period [s] the gains are designed for (one step per call)
+    reference_model : "velocity" (constant velocity, Ch. 9.2.1, the thesis's
+        best) or "position" (constant position)
+    q_error : (4,) or (4, 4) Q_e on [x, y, z, q3] errors
+    r_input : (4,) or (4, 4) R on [omega_x, omega_y, omega_z, F_z]
+    q_integral : (4,) diagonal weights on the integrated errors (0 = no
+        integrator), or None (default): no integral action
+    integral_limit : clamp on each integrated error [m s]
+    disturbance_tau : time constant [s] of the constant-disturbance observer
+        that removes the steady-state error (default 1 s), or None for the
+        thesis's controller without it
+    velocity_source : "reference" (use ``Reference.velocity``) or "samples"
+        (filter the differences of the reference samples, as the thesis)
+    velocity_filter : weight of the previous velocity in that filter, 0..1
+    max_reference_speed : a sample difference faster than this [m/s] is a
+        set-point step, not motion, and is not fed forward
+    rate_loop_tau : if given [s], design on the model with the first-order
+        rate-loop lag and feed back the measured body rates
+    limits : output saturation; default from ``params`` (stick ranges)
+    """
+
+    def __init__(
+        self,
+        *,
+        params: QuadrotorParams | None = None,
+        dt: float = 0.01,
+        reference_model: ReferenceKind = "velocity",
+        q_error: Sequence[float] = DEFAULT_Q_ERROR,
+        r_input: Sequence[float] = DEFAULT_R_INPUT,
+        q_integral: Sequence[float] | None = None,
+        integral_limit: float = 0.5,
+        disturbance_tau: float | None = DEFAULT_DISTURBANCE_TAU,
+        velocity_source: Literal["reference", "samples"] = "reference",
+        velocity_filter: float = 0.5,
+        max_reference_speed: float = 5.0,
+        rate_loop_tau: float | None = None,
+        limits: CommandLimits | None = None,
+    ) -> None:
+        self.params = params if params is not None else QuadrotorParams()
+        if not (dt > 0.0 and math.isfinite(dt)):
+            raise ControlError(f"dt must be a positive period [s], found {dt!r}")
+        if not 0.0 <= velocity_filter < 1.0:
+            raise ControlError(f"velocity_filter must be in [0, 1), found {velocity_filter!r}")
+        if velocity_source not in ("reference", "samples"):
+            raise ControlError(f"velocity_source must be 'reference' or 'samples', "
+                               f"found {velocity_source!r}")
+        self.dt = dt
+        self.reference_model: ReferenceKind = reference_model
+        self._use_ref_velocity = velocity_source == "reference"
+        self._alpha = velocity_filter
+        self._max_step = max_reference_speed * dt
+        self._integral_limit = integral_limit
+        self.gains, self._n_s, integrated, Phi, Gamma = self._design(
+            q_error, r_input, q_integral, rate_loop_tau
+        )
+        self._observer = (None if disturbance_tau is None
+                          else DisturbanceObserver(Phi, Gamma, dt, disturbance_tau))
+        self._half_inv_g = 0.5 / self.params.g
+        self._int_idx = np.array(integrated, dtype=int)  # integrated outputs (of x, y, z, q3)
+        self._int_rows = np.take(H_OUTPUTS, self._int_idx)  # their rows in x_s
+        lim = limits or CommandLimits.from_stick_params(StickParams.from_quadrotor(self.params))
+        self._u_lo = np.array([*lim.omega_min, lim.f_z_min])
+        self._u_hi = np.array([*lim.omega_max, lim.f_z_max])
+        g = self.gains
+        self._K = np.hstack([g.K_s, g.K_i, g.K_r])
+        n_i, n_r = g.K_i.shape[1], g.K_r.shape[1]
+        self._z = np.zeros(self._n_s + n_i + n_r)  # [x_s; x_i; x_r]
+        self._xs = self._z[: self._n_s]
+        self._xi = self._z[self._n_s : self._n_s + n_i]
+        self._xr = self._z[self._n_s + n_i :]
+        self._u = np.zeros(4)
+        self._e = np.zeros(4)
+        self._d = np.zeros(4)  # filtered reference step per sample
+        self._r_last = np.zeros(4)
+        self._have_last = False
+
+    def _design(
+        self, q_error: Sequence[float], r_input: Sequence[float],
+        q_integral: Sequence[float] | None, tau: float | None,
+    ) -> tuple[TrackingGains, int, list[int], np.ndarray, np.ndarray]:
+        model = (hover_model_reduced(self.params) if tau is None
+                 else hover_model_rate_lag(self.params, tau))
+        Phi, Gamma = model.discretize(self.dt)
+        n_s = Phi.shape[0]
+        H_s = np.zeros((4, n_s))
+        H_s[np.arange(4), H_OUTPUTS] = 1.0
+        integrated: list[int] = []
+        Q_i = None
+        if q_integral is not None:
+            qi = np.asarray(q_integral, dtype=float)
+            if qi.shape != (4,) or np.any(qi < 0.0) or not np.all(np.isfinite(qi)):
+                raise ControlError(f"q_integral must be 4 non-negative weights, found {qi!r}")
+            integrated = [k for k in range(4) if qi[k] > 0.0]
+            Q_i = np.diag(qi[integrated]) if integrated else None
+        gains = design_tracking_lqr(
+            Phi, Gamma, H_s, _diag(q_error, 4, "q_error"), _diag(r_input, 4, "r_input"),
+            reference=self.reference_model, dt=self.dt, Q_i=Q_i, integrate=integrated,
+        )
+        return gains, n_s, integrated, Phi, Gamma
+
+    def reset(self) -> None:
+        """Zero the integrators and forget the previous reference sample."""
+        self._xi[:] = 0.0
+        self._d[:] = 0.0
+        self._have_last = False
+        if self._observer is not None:
+            self._observer.reset()
+
+    @property
+    def disturbance(self) -> np.ndarray:
+        """Current disturbance estimate (3,) [m/s^2, body axes] (zeros without observer)."""
+        return self._observer.estimate if self._observer is not None else np.zeros(3)
+
+    def step(self, t: float, estimate: StateEstimate, reference: Reference) -> ControlOutput:
+        """One control step: body-rate set points [rad/s] and F_z [N], saturated."""
+        xs = self._xs
+        fill_reduced_state(estimate, xs)
+        if self._n_s == 12:
+            xs[9:12] = estimate.omega
+        obs = self._observer
+        if obs is not None:
+            d = obs.update(xs)
+            xs[3] += d[1] * self._half_inv_g  # hold the tilt that cancels d (eq. 4.22-4.23)
+            xs[4] -= d[0] * self._half_inv_g
+        r = reference_outputs(reference, self._e)
+        self._update_reference_state(r, reference)
+        u = np.dot(self._K, self._z, out=self._u)
+        if obs is not None:
+            u[3] -= self.params.mass * obs.estimate[2]
+        saturated = bool(np.any(u < self._u_lo) or np.any(u > self._u_hi))
+        np.clip(u, self._u_lo, self._u_hi, out=u)
+        if self._int_idx.size and not saturated:
+            err = r[self._int_idx] - xs[self._int_rows]
+            xi = self._xi
+            xi += self.dt * err
+            np.clip(xi, -self._integral_limit, self._integral_limit, out=xi)
+        if obs is not None:
+            obs.commit(u)
+        return ControlOutput(omega=u[0:3].copy(), f_z=float(u[3]))
+
+    def _update_reference_state(self, r: np.ndarray, reference: Reference) -> None:
+        """Fill x_r: ``r`` (constant position) or ``[r; r - d]`` (constant velocity)."""
+        xr = self._xr
+        xr[0:4] = r
+        if self.reference_model == "position":
+            return
+        d = self._d
+        if self._have_last:
+            raw = r - self._r_last
+            if np.any(np.abs(raw[:3]) > self._max_step):
+                raw[:] = 0.0  # a set-point step is not a velocity
+            d *= self._alpha
+            d += (1.0 - self._alpha) * raw
+        self._r_last[:] = r
+        self._have_last = True
+        if self._use_ref_velocity:
+            d[0:3] = self.dt * reference.velocity
+        xr[4:8] = r
+        xr[4:8] -= d

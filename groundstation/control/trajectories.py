@@ -1,0 +1,176 @@
+"""The named trajectories of thesis Ch. 11 and a waypoint file reader.
+
+:func:`make_trajectory` builds one by name (the names of
+``TrajectoryConfig.name``); :func:`trajectory_from_config` does the same from a
+``TrajectoryConfig``. Frames: NED, so a height of 1 m is ``z = -1``; seen from
+above, x (north) points up and y (east) right, so clockwise is
+north -> east -> south -> west.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from groundstation.control.trajectory import FigureEight, Hover, PiecewiseLinear, Trajectory
+from groundstation.errors import TrajectoryError
+from groundstation.types import FloatArray
+
+if TYPE_CHECKING:
+    from groundstation.config import TrajectoryConfig
+
+TRAJECTORY_NAMES = (
+    "hover", "step-x", "step-y", "step-z", "square", "yz-rectangle", "low-hover",
+    "figure-eight", "waypoints",
+)
+
+
+def square(
+    center: FloatArray | list[float] = (0.0, 0.0, -1.0),  # type: ignore[assignment]
+    *,
+    size_m: float = 0.75,
+    period_s: float = 20.0,
+    smoothing_s: float = 0.0,
+) -> PiecewiseLinear:
+    """The Ch. 11.3 square: ``size_m`` x ``size_m`` horizontal, clockwise seen from above.
+
+    Starts at the north-west corner and flies east, south, west, north at the
+    constant speed ``4 size_m / period_s`` (0.15 m/s for the thesis's 0.75 m and
+    20 s), one lap per ``period_s``. Centre NED [m], default 1 m above the floor.
+    """
+    c = np.asarray(center, dtype=float)
+    h = 0.5 * size_m
+    corners = [(+h, -h), (+h, +h), (-h, +h), (-h, -h), (+h, -h)]  # NW, NE, SE, SW, NW
+    points = np.array([[c[0] + dx, c[1] + dy, c[2]] for dx, dy in corners])
+    times = np.linspace(0.0, period_s, 5)
+    return PiecewiseLinear(times, points, periodic=True, smoothing_s=smoothing_s, name="square")
+
+
+def yz_rectangle(
+    center: FloatArray | list[float] = (0.0, 0.0, -1.0),  # type: ignore[assignment]
+    *,
+    width_m: float = 0.75,
+    height_m: float = 0.5,
+    period_s: float = 20.0,
+    smoothing_s: float = 0.0,
+) -> PiecewiseLinear:
+    """The rectangle of Fig. 11.7 in the vertical y-z plane (x fixed).
+
+    ``width_m`` along y (east), ``height_m`` vertically; the figure prints no
+    dimensions, so the defaults keep it inside the Table B.1 volume. Starts at
+    the upper west corner, flies east along the top, down, west along the
+    bottom and up again; the time per edge is proportional to its length
+    (constant speed ``2 (width + height) / period_s``).
+    """
+    c = np.asarray(center, dtype=float)
+    w, h = 0.5 * width_m, 0.5 * height_m
+    corners = [(-w, -h), (+w, -h), (+w, +h), (-w, +h), (-w, -h)]  # (dy, dz); -dz is up
+    points = np.array([[c[0], c[1] + dy, c[2] + dz] for dy, dz in corners])
+    lengths = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    times = np.concatenate([[0.0], np.cumsum(lengths)]) * (period_s / float(np.sum(lengths)))
+    return PiecewiseLinear(
+        times, points, periodic=True, smoothing_s=smoothing_s, name="yz-rectangle"
+    )
+
+
+def load_waypoints(path: str | Path, *, smoothing_s: float = 0.0) -> PiecewiseLinear:
+    """Read a CSV of ``t, x, y, z[, yaw]`` rows (s, NED m, rad) into an open path.
+
+    A first line that is not numeric is a header; blank lines and lines
+    starting with ``#`` are skipped. Times are taken relative to the first
+    row and must increase strictly; the path holds the last point at the end.
+    Raises TrajectoryError naming the line of any problem.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise TrajectoryError(f"{path}: cannot read waypoints: {exc.strerror}") from exc
+    rows: list[list[float]] = []
+    for lineno, row in enumerate(csv.reader(text.splitlines()), start=1):
+        if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
+            continue
+        try:
+            values = [float(cell) for cell in row]
+        except ValueError:
+            if not rows and lineno == 1:
+                continue  # header
+            raise TrajectoryError(f"{path}:{lineno}: not a number in {row!r}") from None
+        if len(values) not in (4, 5) or not all(math.isfinite(v) for v in values):
+            raise TrajectoryError(
+                f"{path}:{lineno}: expected 4 or 5 finite values (t, x, y, z[, yaw]), "
+                f"found {row!r}"
+            )
+        if rows and len(values) != len(rows[0]):
+            raise TrajectoryError(f"{path}:{lineno}: row has {len(values)} columns, "
+                                  f"the first had {len(rows[0])}")
+        rows.append(values)
+    if len(rows) < 2:
+        raise TrajectoryError(f"{path}: needs at least 2 waypoints, found {len(rows)}")
+    data = np.array(rows)
+    yaw: float | FloatArray = data[:, 4] if data.shape[1] == 5 else 0.0
+    try:
+        return PiecewiseLinear(data[:, 0] - data[0, 0], data[:, 1:4], smoothing_s=smoothing_s,
+                               yaw=yaw, name="waypoints")
+    except TrajectoryError as exc:
+        raise TrajectoryError(f"{path}: {exc}") from None
+
+
+def make_trajectory(
+    name: str,
+    *,
+    center: FloatArray | list[float] | tuple[float, float, float] = (0.0, 0.0, -1.0),
+    size_m: float = 0.75,
+    period_s: float = 20.0,
+    step_m: float = 0.5,
+    step_time_s: float = 1.0,
+    low_height_m: float = 0.02,
+    corner_smoothing_s: float = 0.0,
+    file: str | Path | None = None,
+) -> Trajectory:
+    """Build a named trajectory (the names of ``TrajectoryConfig.name``).
+
+    hover: hold ``center``. step-x / step-y: hold ``center``, then at
+    ``step_time_s`` step ``step_m`` north / east. step-z: step ``step_m`` *up*
+    (z decreases; a step towards the floor is the riskier test). square: Ch. 11.3.
+    yz-rectangle: Fig. 11.7 (width ``size_m``, height ``2/3 size_m``).
+    low-hover: ``center`` in x, y at ``low_height_m`` above the floor (Ch. 11.4).
+    figure-eight: lemniscate ``size_m`` wide, one lap per ``period_s``.
+    waypoints: the CSV ``file`` (see :func:`load_waypoints`).
+    """
+    c = np.asarray(center, dtype=float)
+    steps = {"step-x": (step_m, 0.0, 0.0), "step-y": (0.0, step_m, 0.0),
+             "step-z": (0.0, 0.0, -step_m)}
+    if name == "hover":
+        return Hover(c)
+    if name in steps:
+        return Hover(c, step=list(steps[name]), step_time=step_time_s, name=name)
+    if name == "square":
+        return square(c, size_m=size_m, period_s=period_s, smoothing_s=corner_smoothing_s)
+    if name == "yz-rectangle":
+        return yz_rectangle(c, width_m=size_m, height_m=size_m * 2.0 / 3.0, period_s=period_s,
+                            smoothing_s=corner_smoothing_s)
+    if name == "low-hover":
+        return Hover([c[0], c[1], -low_height_m], name="low-hover")
+    if name == "figure-eight":
+        return FigureEight(c, width_m=size_m, period_s=period_s)
+    if name == "waypoints":
+        if file is None:
+            raise TrajectoryError("trajectory 'waypoints' needs a file")
+        return load_waypoints(file, smoothing_s=corner_smoothing_s)
+    raise TrajectoryError(f"unknown trajectory {name!r}; known: {', '.join(TRAJECTORY_NAMES)}")
+
+
+def trajectory_from_config(config: TrajectoryConfig, **overrides: Any) -> Trajectory:
+    """:func:`make_trajectory` with the fields of a ``TrajectoryConfig``."""
+    params: dict[str, Any] = {
+        "center": config.center, "size_m": config.size_m, "period_s": config.period_s,
+        "step_m": config.step_m, "low_height_m": config.low_height_m,
+        "corner_smoothing_s": config.corner_smoothing_s, "file": config.file,
+    }
+    params.update(overrides)
+    return make_trajectory(config.name, **params)

@@ -1,0 +1,264 @@
+"""Trajectory primitives: a reference position, velocity and acceleration at any time.
+
+Every trajectory is a pure function of the time since it started; it holds no
+clock and no state, so the loop, the tests and the feasibility check can sample
+it anywhere (:class:`Trajectory` protocol). Positions are NED [m] (hovering 1 m
+above the floor is ``z = -1``), velocities [m/s], accelerations [m/s^2].
+
+The shapes of thesis Ch. 11 are built from three primitives:
+
+* :class:`Hover`: a fixed point, optionally with a step of the set point.
+* :class:`PiecewiseLinear`: straight segments at constant speed between knots
+  (square, rectangle, waypoints), open or periodic, with optional corner
+  smoothing by a moving-average window of ``smoothing_s`` seconds. The
+  moving average of a piecewise-linear path is computed exactly from its
+  piecewise-quadratic antiderivative: the smoothed velocity is
+  ``(p(t + T/2) - p(t - T/2)) / T`` and the acceleration the same difference of
+  velocities, so the corners become parabolic blends with a bounded
+  acceleration ``|Δv| / T`` while the straight parts are untouched.
+* :class:`FigureEight`: a smooth lemniscate of Gerono with analytic derivatives.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from groundstation.errors import TrajectoryError
+from groundstation.types import FloatArray, Reference
+
+_ZERO3 = np.zeros(3)
+
+
+@runtime_checkable
+class Trajectory(Protocol):
+    """A reference that can be sampled at any time since its start.
+
+    ``duration`` [s] is the length of the interesting part: one lap for a
+    periodic trajectory (it repeats afterwards), the end of the last segment
+    for an open one (it holds its last point afterwards), ``0`` for a hover.
+    """
+
+    name: str
+    duration: float
+    periodic: bool
+
+    def sample(self, t: float) -> Reference:
+        """The reference at ``t`` seconds after the start (NED, SI units)."""
+        ...
+
+
+def _vec3(value: FloatArray | list[float] | tuple[float, ...], what: str) -> FloatArray:
+    arr = np.asarray(value, dtype=float).reshape(-1)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise TrajectoryError(f"{what} must be 3 finite numbers (NED, m), found {value!r}")
+    return arr
+
+
+class Hover:
+    """Hold ``point``; optionally step by ``step`` at ``step_time`` (a set-point change).
+
+    point : (3,) NED [m]; step : (3,) NED offset [m]; step_time [s]; yaw [rad].
+    The step is a discontinuity: velocity and acceleration stay zero, so the
+    controller sees a pure set-point change as in the thesis's Fig. 11.4.
+    """
+
+    periodic = False
+
+    def __init__(
+        self,
+        point: FloatArray | list[float],
+        *,
+        step: FloatArray | list[float] | None = None,
+        step_time: float = 1.0,
+        yaw: float = 0.0,
+        name: str = "hover",
+    ) -> None:
+        self.name = name
+        self._p0 = _vec3(point, "hover point")
+        self._p1 = self._p0 + (_vec3(step, "step") if step is not None else 0.0)
+        if not (math.isfinite(step_time) and step_time >= 0.0):
+            raise TrajectoryError(f"step_time must be a finite time >= 0 s, found {step_time!r}")
+        self._t_step = float(step_time)
+        self.duration = self._t_step if step is not None else 0.0
+        self._yaw = float(yaw)
+
+    def sample(self, t: float) -> Reference:
+        """Set point before / after the step; zero velocity and acceleration."""
+        p = self._p0 if t < self._t_step else self._p1
+        return Reference(t=t, position=p.copy(), velocity=np.zeros(3),
+                         acceleration=np.zeros(3), yaw=self._yaw)
+
+
+class PiecewiseLinear:
+    """Straight segments between knots, traversed at constant speed per segment.
+
+    times : (N,) strictly increasing knot times [s], starting at 0
+    points : (N, 3) knot positions, NED [m]
+    periodic : the path repeats with period ``times[-1]``; then ``points[-1]``
+        must equal ``points[0]`` (the loop is closed)
+    smoothing_s : width T [s] of the moving-average window that rounds the
+        corners (0 = sharp corners as flown in the thesis); must be shorter
+        than the shortest segment
+    yaw : constant heading [rad], or (N,) headings at the knots [rad],
+        interpolated linearly (not smoothed)
+
+    Before the first knot an open path holds ``points[0]``, after the last it
+    holds ``points[-1]``.
+    """
+
+    def __init__(
+        self,
+        times: FloatArray | list[float],
+        points: FloatArray | list[list[float]],
+        *,
+        periodic: bool = False,
+        smoothing_s: float = 0.0,
+        yaw: float | FloatArray = 0.0,
+        name: str = "path",
+    ) -> None:
+        t = np.asarray(times, dtype=float).reshape(-1)
+        p = np.asarray(points, dtype=float)
+        _check_knots(t, p, periodic)
+        self.name = name
+        self.periodic = periodic
+        self.duration = float(t[-1])
+        self._t: FloatArray = t
+        self._p: FloatArray = p
+        self._v: FloatArray = np.diff(p, axis=0) / np.diff(t)[:, None]  # (N-1, 3) per segment
+        # antiderivative of p at the knots (exact: trapezoid of a linear segment)
+        seg = 0.5 * (p[1:] + p[:-1]) * np.diff(t)[:, None]
+        self._integral: FloatArray = np.vstack([np.zeros(3), np.cumsum(seg, axis=0)])
+        if not (math.isfinite(smoothing_s) and smoothing_s >= 0.0):
+            raise TrajectoryError(f"smoothing_s must be >= 0 s, found {smoothing_s!r}")
+        if smoothing_s > 0.0 and smoothing_s >= float(np.min(np.diff(t))):
+            raise TrajectoryError(
+                f"corner smoothing {smoothing_s:g} s must be shorter than the shortest "
+                f"segment ({float(np.min(np.diff(t))):g} s)"
+            )
+        self.smoothing_s = float(smoothing_s)
+        yaws = np.broadcast_to(np.asarray(yaw, dtype=float), t.shape)
+        if not np.all(np.isfinite(yaws)):
+            raise TrajectoryError("yaw must be finite")
+        self._yaws = np.array(yaws)
+        self._constant_yaw = bool(np.all(yaws == yaws[0]))
+
+    def _yaw(self, t: float) -> float:
+        if self._constant_yaw:
+            return float(self._yaws[0])
+        i, tau, _ = self._locate(t)
+        frac = tau / (self._t[i + 1] - self._t[i])
+        return float(self._yaws[i] + frac * (self._yaws[i + 1] - self._yaws[i]))
+
+    # -- exact piecewise evaluation of p, v and the antiderivative of p
+    def _locate(self, t: float) -> tuple[int, float, float]:
+        """(segment index, time into it, number of whole periods or 0)."""
+        laps = 0.0
+        if self.periodic:
+            laps = math.floor(t / self.duration)
+            t -= laps * self.duration
+        t = min(max(t, self._t[0]), self._t[-1])
+        i = int(np.searchsorted(self._t, t, side="right")) - 1
+        i = min(max(i, 0), len(self._t) - 2)
+        return i, t - self._t[i], laps
+
+    def _pos(self, t: float) -> FloatArray:
+        i, tau, _ = self._locate(t)
+        out: FloatArray = self._p[i] + self._v[i] * tau
+        return out
+
+    def _vel(self, t: float) -> FloatArray:
+        if not self.periodic and (t < self._t[0] or t >= self._t[-1]):
+            return _ZERO3
+        i, _, _ = self._locate(t)
+        out: FloatArray = self._v[i]
+        return out
+
+    def _antiderivative(self, t: float) -> FloatArray:
+        """∫_0^t p(s) ds, with the constant extensions of an open path."""
+        out: FloatArray
+        if not self.periodic and t > self._t[-1]:
+            out = self._integral[-1] + self._p[-1] * (t - self._t[-1])
+        elif not self.periodic and t < 0.0:
+            out = self._p[0] * t
+        else:
+            i, tau, laps = self._locate(t)
+            within = self._integral[i] + self._p[i] * tau + 0.5 * self._v[i] * tau * tau
+            out = laps * self._integral[-1] + within
+        return out
+
+    def sample(self, t: float) -> Reference:
+        """Position, velocity and acceleration at ``t`` (smoothed if ``smoothing_s`` > 0)."""
+        big_t = self.smoothing_s
+        if big_t == 0.0:
+            return Reference(t=t, position=self._pos(t), velocity=self._vel(t).copy(),
+                             acceleration=np.zeros(3), yaw=self._yaw(t))
+        lo, hi = t - 0.5 * big_t, t + 0.5 * big_t
+        pos = (self._antiderivative(hi) - self._antiderivative(lo)) / big_t
+        vel = (self._pos(hi) - self._pos(lo)) / big_t  # _pos holds the end points
+        acc = (self._vel(hi) - self._vel(lo)) / big_t
+        return Reference(t=t, position=pos, velocity=vel, acceleration=acc, yaw=self._yaw(t))
+
+
+def _check_knots(t: FloatArray, p: FloatArray, periodic: bool) -> None:
+    """Raise TrajectoryError unless the knots describe a valid path."""
+    if t.ndim != 1 or t.size < 2:
+        raise TrajectoryError(f"a path needs at least 2 knots, found {t.size}")
+    if p.shape != (t.size, 3):
+        raise TrajectoryError(f"points must have shape ({t.size}, 3), found {p.shape}")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(p))):
+        raise TrajectoryError("knot times and points must be finite")
+    if t[0] != 0.0:
+        raise TrajectoryError(f"the first knot time must be 0 s, found {t[0]:g} s")
+    if np.any(np.diff(t) <= 0.0):
+        k = int(np.argmax(np.diff(t) <= 0.0))
+        raise TrajectoryError(
+            f"knot times must increase strictly: t[{k + 1}] = {t[k + 1]:g} s follows "
+            f"t[{k}] = {t[k]:g} s"
+        )
+    if periodic and not np.allclose(p[0], p[-1], atol=1e-9):
+        raise TrajectoryError("a periodic path must end where it starts (closed loop)")
+
+
+class FigureEight:
+    """A lemniscate of Gerono in the horizontal plane at constant height.
+
+    ``y = a sin(w t)``, ``x = (a / 2) sin(2 w t)`` with ``w = 2 pi / period``,
+    centred on ``center`` (NED [m]): the figure is ``2a`` wide along y (east) and
+    ``a`` along x (north) and starts at the centre heading north-east.
+    Velocity and acceleration are the exact derivatives.
+    """
+
+    periodic = True
+
+    def __init__(
+        self,
+        center: FloatArray | list[float],
+        *,
+        width_m: float = 1.0,
+        period_s: float = 20.0,
+        yaw: float = 0.0,
+        name: str = "figure-eight",
+    ) -> None:
+        if not (width_m > 0.0 and period_s > 0.0):
+            raise TrajectoryError(
+                f"figure-eight needs width_m > 0 and period_s > 0, found {width_m!r}, {period_s!r}"
+            )
+        self.name = name
+        self.duration = float(period_s)
+        self._c = _vec3(center, "figure-eight centre")
+        self._a = 0.5 * float(width_m)
+        self._w = 2.0 * math.pi / float(period_s)
+        self._yaw = float(yaw)
+
+    def sample(self, t: float) -> Reference:
+        """Exact position, velocity and acceleration of the lemniscate at ``t``."""
+        a, w = self._a, self._w
+        s1, c1 = math.sin(w * t), math.cos(w * t)
+        s2, c2 = math.sin(2 * w * t), math.cos(2 * w * t)
+        pos = self._c + np.array([0.5 * a * s2, a * s1, 0.0])
+        vel = np.array([a * w * c2, a * w * c1, 0.0])
+        acc = np.array([-2.0 * a * w * w * s2, -a * w * w * s1, 0.0])
+        return Reference(t=t, position=pos, velocity=vel, acceleration=acc, yaw=self._yaw)
