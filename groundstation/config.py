@@ -183,7 +183,8 @@ class VehicleConfig(_Model):
     # [K_phi, K_theta, K_psi] rad/s per stick unit: max roll step 2047 gave 2.25 rad/s
     # (Ch. 3.3.1), identified values not printed (DESIGN.md errata); yaw assumed the same
     thrust_poly: list[float] = Field(
-        default_factory=lambda: [2.073e-10, -1.143e-6, -1.054e-3, -0.903], min_length=2
+        default_factory=lambda: [2.073e-10, -1.143e-6, -1.054e-3, -0.903],
+        min_length=4, max_length=4,
     )  # eq. 3.7, [a3, a2, a1, a0], body-z force [N] (negative = up); App. C.1's a2 is a typo
     induced_inflow: float = Field(-0.423, lt=0)  # I_i, eq. 3.9 and eq. C.8 [N s/m]
     gyro_scale: Vec3 = Field(default_factory=lambda: [0.0144, 0.0143, 0.0127])
@@ -271,22 +272,33 @@ class EstimatorConfig(_Model):
 class LqrConfig(_Model):
     """LQR with a reference model (thesis Ch. 9). Weights on the error e = r - y."""
 
-    q_error: Covariance = Field(default_factory=lambda: [8.0, 8.0, 20.0, 2.0])
-    # Q_e on [x, y, z, q3] errors (eq. 9.18); tuned for ~0.2 Hz x/y bandwidth as Ch. 11.2
-    r_input: Covariance = Field(default_factory=lambda: [4e6, 4e6, 2.0, 4e6])
-    # R on [u_phi, u_theta, F_z, u_psi] (eq. 4.31; stick units and N), tuned
-    q_integral: Covariance | None = Field(default_factory=lambda: [0.5, 0.5, 2.0, 0.0])
-    # weights on the integrated [x, y, z, q3] errors; beyond the thesis: zero steady-state
-    # error under thrust/mass/bias disturbances (issue 7). None disables integral action.
+    q_error: list[float] = Field(default_factory=lambda: [8.0, 8.0, 20.0, 2.0],
+                                 min_length=4, max_length=4)
+    # Q_e on [x, y, z, q3] errors (eq. 9.18) [1/m^2, -]; tuned for ~0.2 Hz x/y as Ch. 11.2
+    r_input: list[float] = Field(default_factory=lambda: [4.0, 4.0, 4.0, 2.0],
+                                 min_length=4, max_length=4)
+    # R on [omega_x, omega_y, omega_z, F_z] [1/(rad/s)^2, 1/N^2]: the body-rate form of
+    # eq. 4.31's input (sticks = omega / K), tuned
+    q_integral: list[float] | None = None
+    # weights on the integrated [x, y, z, q3] errors; None = no integrators (the
+    # disturbance observer below already removes the steady-state error)
     integral_limit: PositiveFloat = 0.5  # anti-windup clamp on each integrated error [m s]
+    disturbance_tau_s: PositiveFloat | None = 1.0
+    # constant-disturbance observer time constant; beyond the thesis: zero steady-state
+    # error under thrust error, droop, wrong mass or accelerometer bias (issue 7)
+    velocity_source: Literal["reference", "samples"] = "reference"
+    # constant-velocity model: the trajectory's own velocity, or filtered sample
+    # differences as the thesis did (eq. 9.22-9.26)
     velocity_filter: float = Field(0.5, ge=0.0, lt=1.0)
-    # constant-velocity reference model: weight of the previous reference velocity
-    # when estimating it from samples (eq. 9.22-9.26 filter), tuned
+    # weight of the previous velocity when velocity_source is "samples", tuned
+    rate_loop_tau_s: PositiveFloat | None = None
+    # design on the model with the on-board rate-loop lag (Ch. 10.3); None = thesis model
 
     @field_validator("q_error", "r_input")
     @classmethod
-    def _pd4(cls, value: Covariance) -> Covariance:
-        _check_covariance(value, 4, "weight")
+    def _positive_weights(cls, value: list[float]) -> list[float]:
+        if any(not (w > 0 and math.isfinite(w)) for w in value):
+            raise ValueError("weights must be finite and positive (diagonal of a PD matrix)")
         return value
 
 

@@ -154,8 +154,16 @@ def test_signal_before_takeoff_hands_back() -> None:
     assert sup.success
 
 
+def test_no_data_before_takeoff_is_a_preflight_failure() -> None:
+    sup = Supervisor(SupervisorLimits(preflight_timeout_s=2.0))
+    assert sup.update(obs(0.0, data_age_s=math.inf, data_rate_hz=0.0)) is State.PREFLIGHT
+    assert "no DATA" in sup.preflight_failures[0]
+    assert sup.update(obs(2.5, data_age_s=math.inf, data_rate_hz=0.0)) is State.ABORTED
+
+
 def test_terminal_states_stay_terminal() -> None:
     sup = Supervisor()
-    sup.update(obs(0.0, data_age_s=1.0))
+    t = airborne(sup)
+    sup.update(obs(t + 1.0, data_age_s=1.0, **FLYING_AT_1M))
     assert sup.state is State.LINK_LOST
-    assert sup.update(obs(1.0)) is State.LINK_LOST
+    assert sup.update(obs(t + 2.0)) is State.LINK_LOST

@@ -17,7 +17,7 @@ States and transitions::
       outside the volume or tilt > max         -> LAND
     any state:
       estimator diverged                       -> HANDBACK (mask 0 at once)
-      no DATA for link_loss_s                  -> LINK_LOST (log and stop)
+      no DATA for link_loss_s (after PREFLIGHT) -> LINK_LOST (log and stop)
       pilot switch off / X-3D not applying us  -> PILOT (respected at once)
       second stop request                      -> HANDBACK
       first stop request: airborne -> LAND (or HANDBACK if configured); on the ground -> DONE
@@ -194,7 +194,7 @@ class Supervisor:
     # ------------------------------------------------------------------ failsafes
     def _global_failsafe(self, obs: Observation) -> tuple[State, str] | None:
         lim = self.limits
-        if obs.data_age_s > lim.link_loss_s:
+        if obs.data_age_s > lim.link_loss_s and self.state is not State.PREFLIGHT:
             return State.LINK_LOST, f"no DATA for {obs.data_age_s:.2f} s"
         if not obs.pilot_enabled:
             return State.PILOT, "pilot switched serial control off"
@@ -241,7 +241,9 @@ class Supervisor:
     def _preflight(self, obs: Observation) -> State:
         lim = self.limits
         failures = []
-        if obs.data_rate_hz < lim.min_data_rate_hz:
+        if obs.data_age_s > lim.link_loss_s:
+            failures.append("no DATA from the X-3D (check serial.port and the radio)")
+        elif obs.data_rate_hz < lim.min_data_rate_hz:
             failures.append(f"DATA at {obs.data_rate_hz:.0f} Hz < {lim.min_data_rate_hz:.0f} Hz")
         if obs.vicon_rate_hz < lim.min_vicon_rate_hz or obs.vicon_age_s > lim.vicon_loss_hold_s:
             failures.append(f"Vicon at {obs.vicon_rate_hz:.0f} Hz")

@@ -1,0 +1,220 @@
+"""The flight core: one tick in, one COMMAND out. No threads, sockets or clocks.
+
+The same :class:`FlightCore` runs inside the real-time daemon
+(:mod:`groundstation.loop.daemon`) and in-process against the virtual lab's
+simulated clock (:mod:`groundstation.loop.inprocess`), so what is tested fast
+is what flies.
+
+Per tick (one DATA sample, 100 Hz):
+
+1. estimator: initialise from the first Vicon fix and a few IMU samples, then
+   predict on the IMU sample and update on every Vicon pose at its own time;
+2. supervisor: observe link, Vicon, estimator, pilot and position; change state;
+3. mission: the reference for the current phase;
+4. controller -> body rates and F_z -> stick units -> channel handover ->
+   CommandMsg (ctrl mask 0 whenever the supervisor is not commanding);
+5. the command is due at the configured command rate (and at once on a change
+   between commanding and not commanding).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from groundstation.asctec.channels import ChannelHandover
+from groundstation.asctec.messages import Channel, CommandMsg
+from groundstation.config import GroundStationConfig
+from groundstation.control.base import Controller
+from groundstation.control.sticks import StickParams, to_sticks
+from groundstation.control.trajectories import trajectory_from_config
+from groundstation.control.trajectory import Trajectory
+from groundstation.estimation.ekf import Ekf
+from groundstation.estimation.records import EkfParams, InitReport
+from groundstation.loop.assemble import controller_from_config
+from groundstation.loop.inputs import InputHealth, VehicleStatus, quadrotor_params
+from groundstation.loop.mission import Mission
+from groundstation.loop.supervisor import Observation, State, Supervisor, SupervisorLimits
+from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
+
+INIT_IMU_SAMPLES = 20
+"""IMU samples (0.2 s at 100 Hz) averaged with the first Vicon fix to initialise."""
+
+
+@dataclass(frozen=True, slots=True)
+class TickResult:
+    """One tick's outcome.
+
+    command : the COMMAND to send (always valid; mask 0 when not commanding)
+    due : send it now (command-rate decimation)
+    state : supervisor state after this tick
+    reference : the reference tracked this tick
+    estimate : the estimate (None until the estimator is initialised)
+    sticks : the controller's sticks before handover (None when not commanding)
+    """
+
+    command: CommandMsg
+    due: bool
+    state: State
+    reference: Reference
+    estimate: StateEstimate | None
+    sticks: Sticks | None
+
+
+def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
+    """Supervisor limits from the safety, serial and Vicon sections."""
+    s = config.safety
+    return SupervisorLimits(
+        volume_x=s.volume_x, volume_y=s.volume_y, volume_z=s.volume_z,
+        max_tilt_rad=math.radians(s.max_tilt_deg), vicon_loss_hold_s=s.vicon_loss_hold_s,
+        vicon_loss_land_s=s.vicon_loss_land_s, link_loss_s=s.link_loss_s,
+        preflight_timeout_s=s.preflight_timeout_s,
+        min_data_rate_hz=0.8 * 1000.0 / config.serial.data_period_ms,
+        min_vicon_rate_hz=config.vicon.min_rate_hz, on_signal=s.on_signal,
+    )
+
+
+class FlightCore:
+    """Estimator, supervisor, mission, controller and handover for one flight.
+
+    config : the validated configuration
+    controller, trajectory, estimator : replace the ones the configuration names
+        (tests and the evaluation inject their own)
+    duration_s : trajectory time flown before landing (default: one trajectory
+        period, or 20 s)
+    """
+
+    def __init__(self, config: GroundStationConfig, *, controller: Controller | None = None,
+                 trajectory: Trajectory | None = None, estimator: Ekf | None = None,
+                 duration_s: float | None = None) -> None:
+        self.config = config
+        quad = quadrotor_params(config)
+        self.ekf = estimator or Ekf(EkfParams.from_config(config.vehicle, config.estimator))
+        self.controller = controller or controller_from_config(config)
+        self.trajectory = trajectory or trajectory_from_config(config.trajectory)
+        duration = duration_s if duration_s is not None else config.trajectory.period_s
+        self.mission = Mission(self.trajectory.sample, duration,
+                               climb_speed=config.safety.takeoff_speed_m_s,
+                               land_speed=config.safety.land_speed_m_s)
+        self.supervisor = Supervisor(limits_from_config(config))
+        self.handover = ChannelHandover(blend_time=config.serial.handover_blend_s)
+        self._auto = tuple(config.channels.auto)
+        self._stick_params = StickParams.from_quadrotor(quad)
+        self._command_period = 1.0 / config.serial.command_rate_hz
+        self._next_command = -math.inf
+        self._was_commanding = False
+        self._imu_buffer: deque[ImuSample] = deque(maxlen=INIT_IMU_SAMPLES)
+        self._t_init: float | None = None
+        self.init_report: InitReport | None = None
+        self._settle_s = config.estimator.settle_time_s
+        self._last_pose: Pose | None = None
+        self._estimate: StateEstimate | None = None
+
+    # ------------------------------------------------------------------ public
+    @property
+    def state(self) -> State:
+        """The supervisor's state."""
+        return self.supervisor.state
+
+    def set_auto_channels(self, channels: Sequence[Channel]) -> None:
+        """Change at run time which channels the ground station controls (bumpless)."""
+        self._auto = tuple(channels)
+        if self.supervisor.commanding:
+            self.handover.set_auto(self._auto)
+
+    def tick(self, t: float, imu: ImuSample | None, poses: Sequence[Pose],
+             vehicle: VehicleStatus, health: InputHealth, stop_requests: int = 0) -> TickResult:
+        """Advance the flight by one tick at monotonic time ``t`` [s]."""
+        self._estimate = self._estimate_step(imu, poses)
+        old = self.supervisor.state
+        state = self.supervisor.update(self._observe(t, vehicle, health, stop_requests))
+        position = self._position()
+        if state is not old:
+            self._enter(state, t, position)
+        reference = self.mission.reference(t)
+        commanding = self.supervisor.commanding
+        sticks: Sticks | None = None
+        if commanding and self._estimate is not None:
+            sticks = self._control(t, state, self._estimate, reference)
+            command = self.handover.compose(t, sticks, vehicle.pilot)
+        else:
+            command = CommandMsg.release()
+        due = t >= self._next_command or commanding != self._was_commanding
+        if due:
+            self._next_command = max(self._next_command + self._command_period, t)
+            if self._next_command <= t:
+                self._next_command = t + self._command_period
+        self._was_commanding = commanding
+        return TickResult(command, due, state, reference, self._estimate, sticks)
+
+    # ------------------------------------------------------------------ steps
+    def _estimate_step(self, imu: ImuSample | None, poses: Sequence[Pose]) -> StateEstimate | None:
+        if poses:
+            self._last_pose = poses[-1]
+        if self.init_report is None:
+            if imu is not None:
+                self._imu_buffer.append(imu)
+            if self._last_pose is not None and len(self._imu_buffer) == INIT_IMU_SAMPLES:
+                self.init_report = self.ekf.initialise(self._last_pose, list(self._imu_buffer))
+                self._t_init = self._last_pose.t
+            return None
+        if imu is not None:
+            self.ekf.predict(imu)
+        for pose in poses:
+            self.ekf.update(pose)
+        return self.ekf.estimate()
+
+    def _observe(self, t: float, vehicle: VehicleStatus, health: InputHealth,
+                 stop_requests: int) -> Observation:
+        est = self._estimate
+        ekf_health = self.ekf.health() if est is not None else None
+        diverged = ekf_health is not None and ekf_health.diverged
+        settled = (self._t_init is not None and est is not None
+                   and est.t - self._t_init >= self._settle_s)
+        gravity_ok = bool(self.init_report is not None and self.init_report.gravity_ok)
+        position = self._position()
+        tilt = 0.0
+        if est is not None:
+            q = est.quaternion  # body z in earth: third column of R(q); cos tilt = R[2, 2]
+            cos_tilt = q[0] * q[0] - q[1] * q[1] - q[2] * q[2] + q[3] * q[3]
+            tilt = math.acos(min(max(cos_tilt, -1.0), 1.0))
+        airborne = self.supervisor.state not in (State.PREFLIGHT,)
+        height = float(self.mission.ground[2] - position[2]) if airborne else 0.0
+        return Observation(
+            t=t, data_age_s=health.data_age_s, data_rate_hz=health.data_rate_hz,
+            vicon_age_s=health.vicon_age_s, vicon_rate_hz=health.vicon_rate_hz,
+            estimator_ok=settled and not diverged, estimator_diverged=diverged,
+            gravity_ok=gravity_ok, position=(position[0], position[1], position[2]),
+            tilt_rad=tilt, height_above_ground_m=height,
+            takeoff_done=self.mission.takeoff_done(t, position),
+            trajectory_done=self.mission.trajectory_done(),
+            pilot_enabled=vehicle.pilot_enabled, vehicle_applying=vehicle.applying,
+            stop_requests=stop_requests,
+        )
+
+    def _position(self) -> np.ndarray:
+        if self._estimate is not None:
+            return self._estimate.position
+        if self._last_pose is not None:
+            return self._last_pose.position
+        return np.zeros(3)
+
+    def _enter(self, state: State, t: float, position: np.ndarray) -> None:
+        self.mission.enter(state, t, position)
+        if state is State.TAKEOFF:
+            self.controller.reset()
+            self.handover.set_auto(self._auto)
+        elif not self.supervisor.commanding:
+            self.handover.set_auto(())
+
+    def _control(self, t: float, state: State, est: StateEstimate,
+                 reference: Reference) -> Sticks:
+        if state is State.DISARM:
+            return Sticks(0, 0, 0, 0)  # motors to idle on the floor before handing back
+        output = self.controller.step(t, est, reference)
+        sticks, _flags = to_sticks(output, self._stick_params)
+        return sticks

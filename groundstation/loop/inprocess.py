@@ -1,0 +1,186 @@
+"""Fly the flight core against the virtual lab on its simulated clock.
+
+Everything between the two is real except the transport: COMMAND and CONFIG
+frames are encoded to bytes and written into the virtual X-3D, DATA frames come
+back as bytes through the same stream decoder, and Vicon datagrams go through
+the same pose filter as on the lab PC. Only the pty, the UDP socket and the wall
+clock are left out, so a flight runs many times faster than real time and is
+the same, bit for bit, for a given seed.
+
+Used by the tests, the evaluation suite (``gs eval --fast``) and ``gs replay``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from groundstation.asctec.decoder import StreamDecoder, encode_frame
+from groundstation.asctec.messages import ConfigMsg, DataMsg
+from groundstation.config import GroundStationConfig
+from groundstation.control.base import Controller
+from groundstation.control.trajectory import Trajectory
+from groundstation.loop.core import FlightCore, TickResult
+from groundstation.loop.inputs import DataFrontEnd
+from groundstation.loop.supervisor import State, Transition
+from groundstation.types import FloatArray, Pose
+from groundstation.vicon.posefilter import PoseFilter
+from sim_device.lab import VirtualLab
+
+Event = Callable[["InProcessFlight"], None]
+"""A scripted action at a simulated time: inject a fault in ``flight.lab``, move the
+pilot's switch, or ``flight.stop_requests += 1`` to simulate SIGINT/SIGTERM."""
+
+_COLUMNS = ("t", "state", "true_pos", "est_pos", "ref_pos", "ref_vel", "true_vel",
+            "est_vel", "sticks", "mask", "true_q", "est_q")
+
+
+@dataclass
+class FlightTrace:
+    """Per-tick arrays of one in-process flight (rows are control ticks).
+
+    t : (N,) time [s]; state : (N,) supervisor state (int);
+    true_pos, est_pos, ref_pos : (N, 3) NED [m]; ref_vel, true_vel : (N, 3) NED [m/s];
+    est_vel : (N, 3) NED [m/s] (estimate rotated to earth axes);
+    sticks : (N, 4) sent [roll, pitch, yaw, thrust] (0 when not commanding);
+    mask : (N,) ctrl mask of the last COMMAND; true_q, est_q : (N, 4) quaternions.
+    """
+
+    rows: dict[str, list[FloatArray | float]] = field(
+        default_factory=lambda: {name: [] for name in _COLUMNS})
+
+    def arrays(self) -> dict[str, FloatArray]:
+        """The trace as numpy arrays."""
+        return {name: np.asarray(values, dtype=float) for name, values in self.rows.items()}
+
+
+@dataclass(frozen=True)
+class FlightResult:
+    """Outcome of an in-process flight."""
+
+    final_state: State
+    success: bool
+    transitions: list[Transition]
+    trace: dict[str, FloatArray]
+    lab: VirtualLab
+    core: FlightCore
+
+    def during(self, state: State) -> np.ndarray:
+        """Boolean mask of the ticks spent in ``state``."""
+        return np.asarray(self.trace["state"] == int(state))
+
+
+def _rotate_to_earth(q: FloatArray, v: FloatArray) -> FloatArray:
+    from groundstation.model.quaternion import rotate
+
+    return rotate(q, v)
+
+
+class InProcessFlight:
+    """One flight of :class:`FlightCore` against a :class:`VirtualLab`, stepped by hand.
+
+    :meth:`run` flies to a terminal state; :meth:`step` advances one DATA period
+    for tests that interleave their own checks.
+    """
+
+    def __init__(self, config: GroundStationConfig, *, lab: VirtualLab | None = None,
+                 controller: Controller | None = None, trajectory: Trajectory | None = None,
+                 duration_s: float | None = None) -> None:
+        self.config = config
+        self.lab = lab if lab is not None else VirtualLab(config)
+        self.core = FlightCore(config, controller=controller, trajectory=trajectory,
+                               duration_s=duration_s)
+        self._profile = config.serial.crc_profile
+        self._decoder = StreamDecoder(self._profile)
+        self._front = DataFrontEnd(config)
+        self._poses = PoseFilter.from_config(config.vicon)
+        self._period = config.serial.data_period_ms / 1000.0
+        self.stop_requests = 0
+        self.trace = FlightTrace()
+        self._last: TickResult | None = None
+        self.lab.write(encode_frame(ConfigMsg(config.serial.sensor_mask,
+                                              config.serial.data_period_ms), self._profile))
+
+    def _vicon(self) -> list[Pose]:
+        out = []
+        for datagram in self.lab.vicon_datagrams():
+            pose = self._poses.process(datagram.data, datagram.t)
+            if pose is not None:
+                out.append(pose)
+        return out
+
+    def step(self) -> None:
+        """Advance the lab by one DATA period and tick the core once per DATA frame."""
+        received: list[tuple[float, DataMsg]] = []
+        for t_rx, data in self.lab.advance(self._period):
+            received.extend((t_rx, m) for m in self._decoder.feed(data) if isinstance(m, DataMsg))
+        poses = self._vicon()
+        if not received:  # stalled stream: the deadline still ticks the supervisor
+            self._tick(self.lab.t, None, poses)
+            return
+        for i, (t_rx, msg) in enumerate(received):
+            self._tick(t_rx, msg, poses if i == 0 else [])
+
+    def _tick(self, t: float, msg: DataMsg | None, poses: Sequence[Pose]) -> None:
+        imu = self._front.receive(t, msg) if msg is not None else None
+        rate = self._poses.rate
+        health = self._front.health(t, rate.time_since_pose(t), rate.rate(t))
+        result = self.core.tick(t, imu, poses, self._front.status, health, self.stop_requests)
+        if result.due:
+            self.lab.write(encode_frame(result.command, self._profile))
+        self._last = result
+        self._record(t, result)
+
+    def _record(self, t: float, r: TickResult) -> None:
+        truth = self.lab.truth
+        est = r.estimate
+        rows = self.trace.rows
+        rows["t"].append(t)
+        rows["state"].append(float(r.state))
+        rows["true_pos"].append(truth.position.copy())
+        rows["true_vel"].append(truth.velocity.copy())
+        rows["true_q"].append(truth.quaternion.copy())
+        nan3 = np.full(3, math.nan)
+        rows["est_pos"].append(est.position.copy() if est is not None else nan3)
+        rows["est_vel"].append(_rotate_to_earth(est.quaternion, est.velocity_body)
+                               if est is not None else nan3)
+        rows["est_q"].append(est.quaternion.copy() if est is not None else np.full(4, math.nan))
+        rows["ref_pos"].append(r.reference.position.copy())
+        rows["ref_vel"].append(r.reference.velocity.copy())
+        s = r.sticks
+        rows["sticks"].append(np.array([s.roll, s.pitch, s.yaw, s.thrust], dtype=float)
+                              if s is not None else np.zeros(4))
+        rows["mask"].append(float(r.command.ctrl))
+
+    def run(self, max_time_s: float = 300.0,
+            events: Sequence[tuple[float, Event]] = ()) -> FlightResult:
+        """Fly until the supervisor reaches a terminal state (or ``max_time_s``).
+
+        events : (simulated time [s], action) pairs run once when the time is reached.
+        """
+        pending = sorted(events, key=lambda e: e[0])
+        while not self.core.supervisor.terminal and self.lab.t < max_time_s:
+            while pending and self.lab.t >= pending[0][0]:
+                pending.pop(0)[1](self)
+            self.step()
+        # The final COMMAND (ctrl mask 0) the daemon sends when it stops.
+        from groundstation.asctec.messages import CommandMsg
+
+        self.lab.write(encode_frame(CommandMsg.release(), self._profile))
+        self.lab.advance(0.05)
+        sup = self.core.supervisor
+        return FlightResult(sup.state, sup.success, list(sup.transitions), self.trace.arrays(),
+                            self.lab, self.core)
+
+
+def fly_in_process(config: GroundStationConfig, *, lab: VirtualLab | None = None,
+                   controller: Controller | None = None, trajectory: Trajectory | None = None,
+                   duration_s: float | None = None, max_time_s: float = 300.0,
+                   events: Sequence[tuple[float, Event]] = ()) -> FlightResult:
+    """Fly one whole flight in-process; see :class:`InProcessFlight`."""
+    flight = InProcessFlight(config, lab=lab, controller=controller, trajectory=trajectory,
+                             duration_s=duration_s)
+    return flight.run(max_time_s=max_time_s, events=events)

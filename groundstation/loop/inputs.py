@@ -1,0 +1,107 @@
+"""From DATA messages and Vicon poses to what the flight core consumes.
+
+Shared by the real-time daemon and the in-process runner so both read the
+vehicle identically: scale the IMU counts, read who flies the vehicle from the
+STATUS and RC blocks, and measure the DATA rate and age.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from groundstation.asctec.messages import DataMsg
+from groundstation.config import GroundStationConfig
+from groundstation.model.quadrotor import QuadrotorParams
+from groundstation.model.sensors import AxisScaling, ImuScaling
+from groundstation.types import ImuSample, Sticks
+from groundstation.vicon.health import RateMonitor
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleStatus:
+    """What the X-3D reports about who flies it (STATUS and RC blocks).
+
+    pilot : the pilot's sticks (RC block)
+    pilot_enabled : RC serial-enable switch on
+    applying : STATUS bit0, the X-3D is applying ground-station commands
+    """
+
+    pilot: Sticks
+    pilot_enabled: bool
+    applying: bool
+
+
+@dataclass(frozen=True, slots=True)
+class InputHealth:
+    """Link and Vicon health as the loop measures them.
+
+    data_age_s, data_rate_hz : time since the last DATA frame [s], its rate [Hz]
+    vicon_age_s, vicon_rate_hz : time since the last accepted pose [s], its rate [Hz]
+    """
+
+    data_age_s: float
+    data_rate_hz: float
+    vicon_age_s: float
+    vicon_rate_hz: float
+
+
+def _vec3(values: list[float]) -> tuple[float, float, float]:
+    return (float(values[0]), float(values[1]), float(values[2]))
+
+
+def quadrotor_params(config: GroundStationConfig) -> QuadrotorParams:
+    """Model parameters from the vehicle section."""
+    v = config.vehicle
+    a3, a2, a1, a0 = v.thrust_poly
+    return QuadrotorParams(mass=v.mass_kg, g=v.gravity, k_rate=_vec3(v.k_rate),
+                           inflow=v.induced_inflow, thrust_poly=(a3, a2, a1, a0))
+
+
+def imu_scaling(config: GroundStationConfig) -> ImuScaling:
+    """Per-axis scale and zero offset of the gyro and accelerometer (Table 6.2)."""
+    v = config.vehicle
+    return ImuScaling(gyro=AxisScaling(_vec3(v.gyro_scale), _vec3(v.gyro_zero)),
+                      acc=AxisScaling(_vec3(v.acc_scale), _vec3(v.acc_zero)))
+
+
+class DataFrontEnd:
+    """Turns each received DATA message into an IMU sample and the vehicle's status.
+
+    A frame without GYRO and ACC yields no IMU sample; without STATUS the X-3D is
+    assumed to apply our commands and without RC the switch is assumed on (the
+    configuration validator insists on gyro and acc; status and rc are advised).
+    """
+
+    def __init__(self, config: GroundStationConfig, rate_window_s: float = 1.0) -> None:
+        self._scaling = imu_scaling(config)
+        self._rate = RateMonitor(window_s=rate_window_s, min_rate_hz=0.0, max_rate_hz=math.inf)
+        self._t_last = -math.inf
+        self._gyro = np.zeros(3)
+        self._acc = np.zeros(3)
+        self.status = VehicleStatus(pilot=Sticks(), pilot_enabled=True, applying=False)
+
+    def receive(self, t: float, msg: DataMsg) -> ImuSample | None:
+        """Record a DATA message received at ``t`` [s]; return its scaled IMU sample."""
+        self._rate.record(t)
+        self._t_last = t
+        status, rc = msg.status, msg.rc
+        if status is not None or rc is not None:
+            self.status = VehicleStatus(
+                pilot=rc.sticks() if rc is not None else self.status.pilot,
+                pilot_enabled=rc.serial_enabled if rc is not None else True,
+                applying=status.serial_active if status is not None else True,
+            )
+        if msg.gyro is None or msg.acc is None:
+            return None
+        g, a = msg.gyro, msg.acc
+        self._gyro[:] = (g.x, g.y, g.z)
+        self._acc[:] = (a.x, a.y, a.z)
+        return self._scaling.scale(t, self._gyro, self._acc, msg.counter)
+
+    def health(self, now: float, vicon_age_s: float, vicon_rate_hz: float) -> InputHealth:
+        """Link and Vicon health at ``now``."""
+        return InputHealth(data_age_s=now - self._t_last, data_rate_hz=self._rate.rate(now),
+                           vicon_age_s=vicon_age_s, vicon_rate_hz=vicon_rate_hz)
