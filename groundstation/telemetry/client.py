@@ -1,0 +1,92 @@
+"""A telemetry subscriber: connects a SUB socket and returns decoded messages.
+
+``TelemetryClient("tcp://127.0.0.1:5556").receive(1.0)`` gives ``(topic, payload)``
+or None on timeout. Malformed messages are counted in
+:attr:`TelemetryClient.bad_messages` and skipped. ZeroMQ subscribers join late
+(the "slow joiner"): messages published before the connection is made are not
+seen, which is fine for a live view.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterable
+from types import TracebackType
+from typing import Any
+
+import zmq
+
+from groundstation.errors import GroundStationError
+from groundstation.telemetry.schema import decode
+
+
+class TelemetryClient:
+    """Receives telemetry from a :class:`~groundstation.telemetry.publisher.TelemetryPublisher`.
+
+    endpoint : the publisher's endpoint, e.g. ``tcp://127.0.0.1:5556``
+    topics : topic prefixes to subscribe to (default: every topic)
+    rcvhwm : messages queued before zmq drops the oldest arrivals
+    context : a zmq.Context to share (not terminated by :meth:`close`)
+    Raises GroundStationError if the endpoint is invalid.
+    """
+
+    def __init__(
+        self, endpoint: str, topics: Iterable[str] = ("",), *, rcvhwm: int = 100,
+        context: zmq.Context[Any] | None = None,
+    ) -> None:
+        self._own_context = context is None
+        self._context: zmq.Context[Any] | None = zmq.Context() if context is None else context
+        self.bad_messages = 0
+        """Messages that could not be decoded (skipped)."""
+        sock = self._context.socket(zmq.SUB)
+        try:
+            sock.setsockopt(zmq.LINGER, 0)
+            sock.setsockopt(zmq.RCVHWM, rcvhwm)
+            for topic in topics:
+                sock.setsockopt(zmq.SUBSCRIBE, topic.encode("ascii"))
+            sock.connect(endpoint)
+        except zmq.ZMQError as exc:
+            sock.close(linger=0)
+            self._close_context()
+            raise GroundStationError(f"telemetry: cannot connect {endpoint!r}: {exc}") from exc
+        self._socket: zmq.Socket[Any] | None = sock
+        self.endpoint = endpoint
+
+    def receive(self, timeout: float | None = None) -> tuple[str, dict[str, Any]] | None:
+        """The next ``(topic, payload)``, or None if none arrives within ``timeout`` [s]
+        (None waits forever). Raises GroundStationError if the client is closed."""
+        if self._socket is None:
+            raise GroundStationError("telemetry client is closed")
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            wait_ms = None if deadline is None else max(0, math.ceil(
+                (deadline - time.monotonic()) * 1e3))
+            if not self._socket.poll(wait_ms, zmq.POLLIN):
+                return None
+            frames = self._socket.recv_multipart(zmq.NOBLOCK)
+            try:
+                return decode(frames)
+            except (ValueError, UnicodeError):
+                self.bad_messages += 1
+
+    def close(self) -> None:
+        """Close the socket and, if the client owns it, terminate the context (idempotent)."""
+        if self._socket is not None:
+            self._socket.close(linger=0)
+            self._socket = None
+        self._close_context()
+
+    def _close_context(self) -> None:
+        if self._own_context and self._context is not None:
+            self._context.term()
+            self._context = None
+
+    def __enter__(self) -> TelemetryClient:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()

@@ -1,0 +1,148 @@
+"""Telemetry message schema, version 1.
+
+Every message is a two-frame ZeroMQ multipart message ``[topic, payload]``:
+``topic`` is the ASCII topic name (subscribers filter on it by prefix) and
+``payload`` a UTF-8 JSON object. JSON is strict: no NaN or Infinity (a value that
+is not finite is sent as ``null``). Vectors are JSON arrays, frames and units
+as in the rest of the package (NED earth, FRD body, scalar-first quaternions,
+SI units, RC units for sticks).
+
+Every payload starts with the envelope::
+
+    schema     int    SCHEMA_VERSION (1); a subscriber should check it
+    topic      str    the topic again (for logs that drop the first frame)
+    seq        int    publisher message counter (gaps = messages dropped on the way)
+    t          float  the loop's time.monotonic() for the snapshot [s]
+    time_unix  float  wall-clock time.time() when sent [s]
+
+Topic ``state``::
+
+    supervisor  {state: int, name: str}
+    estimate    {position [3] m NED, quaternion [4], velocity_body [3] m/s FRD,
+                 omega [3] rad/s FRD, gyro_bias [3] rad/s, acc_bias [3] m/s^2} | null
+    reference   {position [3] m NED, velocity [3] m/s NED, yaw rad} | null
+    error       {position [3] m NED (reference - estimate), distance m} | null
+    command     {pitch, roll, yaw, thrust: RC units; mask: ctrl-mask bits; sent: bool}
+
+Topic ``health`` (each section an object, or null when that part is not running)::
+
+    link        serial link: rate_hz (DATA frames/s), rejected {reason: count},
+                time_since_data_s, and any further counters
+    vicon       Vicon input: rate_hz (accepted poses/s), rejected {reason: count},
+                time_since_pose_s, and any further counters (ViconHealth's fields)
+    estimator   estimator counters, e.g. rejected updates (free-form object)
+    loop        loop timing, e.g. overruns, compute_time_s, jitter_s (free-form)
+    telemetry   {sent, dropped, errors}: this publisher's own counters
+
+:func:`state_payload` and :func:`health_payload` build the bodies; the publisher
+adds the envelope. Extra keys may be added within a schema version; removing or
+changing a key bumps :data:`SCHEMA_VERSION`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import json
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from groundstation.types import Reference, StateEstimate, Sticks
+
+SCHEMA_VERSION = 1
+
+TOPIC_STATE = "state"
+TOPIC_HEALTH = "health"
+
+ENVELOPE_FIELDS = ("schema", "topic", "seq", "t", "time_unix")
+REQUIRED_FIELDS: dict[str, tuple[str, ...]] = {
+    TOPIC_STATE: (*ENVELOPE_FIELDS, "supervisor", "estimate", "reference", "error", "command"),
+    TOPIC_HEALTH: (*ENVELOPE_FIELDS, "link", "vicon", "estimator", "loop", "telemetry"),
+}
+"""Top-level keys every payload of a topic carries."""
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` as plain JSON types: arrays and tuples -> lists, numpy scalars -> Python,
+    dataclasses and mappings -> dicts, enums -> their names, non-finite floats -> None."""
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, bool | int | str) or value is None:
+        return value.name if isinstance(value, enum.Enum) else value
+    if isinstance(value, np.ndarray):
+        return [jsonable(v) for v in value.tolist()]
+    if isinstance(value, np.integer | np.bool_):
+        return value.item()
+    if isinstance(value, enum.Enum):
+        return value.name
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        value = {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
+    if isinstance(value, Mapping):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | set | frozenset):
+        return [jsonable(v) for v in value]
+    return str(value)
+
+
+def encode(topic: str, payload: Mapping[str, Any]) -> list[bytes]:
+    """The two frames of a message; ``payload`` must already carry the envelope."""
+    body = json.dumps(jsonable(payload), separators=(",", ":"), allow_nan=False)
+    return [topic.encode("ascii"), body.encode("utf-8")]
+
+
+def decode(frames: list[bytes]) -> tuple[str, dict[str, Any]]:
+    """``(topic, payload)`` from received frames; ValueError if they are not a message."""
+    if len(frames) != 2:
+        raise ValueError(f"expected 2 frames, got {len(frames)}")
+    topic = frames[0].decode("ascii")
+    payload = json.loads(frames[1].decode("utf-8"))
+    if not isinstance(payload, dict) or not isinstance(payload.get("schema"), int):
+        raise ValueError("payload is not an object with an integer 'schema'")
+    return topic, payload
+
+
+def missing_fields(topic: str, payload: Mapping[str, Any]) -> list[str]:
+    """Required top-level keys of ``topic`` absent from ``payload`` (empty if complete)."""
+    return [key for key in REQUIRED_FIELDS.get(topic, ENVELOPE_FIELDS) if key not in payload]
+
+
+def state_payload(
+    *, state: int, state_name: str, estimate: StateEstimate | None,
+    reference: Reference | None, sticks: Sticks, ctrl_mask: int, sent: bool,
+) -> dict[str, Any]:
+    """Body of a ``state`` message (see the module docstring for fields and units),
+    already in plain JSON types."""
+    error = None
+    if estimate is not None and reference is not None:
+        e = np.asarray(reference.position) - np.asarray(estimate.position)
+        error = {"position": e, "distance": float(np.linalg.norm(e))}
+    body: dict[str, Any] = jsonable({
+        "supervisor": {"state": int(state), "name": state_name},
+        "estimate": None if estimate is None else {
+            "position": estimate.position, "quaternion": estimate.quaternion,
+            "velocity_body": estimate.velocity_body, "omega": estimate.omega,
+            "gyro_bias": estimate.gyro_bias, "acc_bias": estimate.acc_bias,
+        },
+        "reference": None if reference is None else {
+            "position": reference.position, "velocity": reference.velocity,
+            "yaw": reference.yaw,
+        },
+        "error": error,
+        "command": {"pitch": sticks.pitch, "roll": sticks.roll, "yaw": sticks.yaw,
+                    "thrust": sticks.thrust, "mask": int(ctrl_mask), "sent": bool(sent)},
+    })
+    return body
+
+
+def health_payload(
+    *, link: Any = None, vicon: Any = None, estimator: Any = None, loop: Any = None,
+) -> dict[str, Any]:
+    """Body of a ``health`` message. Each section is a mapping or a dataclass
+    (e.g. :class:`groundstation.vicon.health.ViconHealth`) or None; ``link`` and
+    ``vicon`` should carry ``rate_hz`` and ``rejected`` for the monitor. The
+    publisher fills in the ``telemetry`` section."""
+    return {"link": jsonable(link), "vicon": jsonable(vicon),
+            "estimator": jsonable(estimator), "loop": jsonable(loop)}
