@@ -5,6 +5,7 @@ compared field by field through independent readers (np.load, np.genfromtxt, jso
 from __future__ import annotations
 
 import datetime as dt
+import io
 import json
 import os
 import signal
@@ -185,6 +186,9 @@ def test_csv_export_reads_back_with_genfromtxt(tmp_path: Path) -> None:
             rec.append(**args)
     out = tmp_path / "flight.csv"
     assert export_csv(rec.directory, out) == 30
+    stream = io.StringIO()
+    assert export_csv(rec.directory / "flight.npy", stream) == 30  # e.g. sys.stdout
+    assert stream.getvalue() == out.read_text()
     csv = np.genfromtxt(out, delimiter=",", names=True)
     assert csv.dtype.names == FLAT_DTYPE.names
     header = out.read_text().splitlines()[0].split(",")

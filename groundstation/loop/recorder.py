@@ -67,7 +67,7 @@ import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 import numpy.typing as npt
@@ -473,8 +473,10 @@ def read_flight(path: str | Path) -> tuple[npt.NDArray[np.void], dict[str, Any],
     return flat.view(RECORD_DTYPE), meta, config
 
 
-def export_csv(path: str | Path, out_csv: str | Path) -> int:
+def export_csv(path: str | Path, out_csv: str | Path | TextIO) -> int:
     """Write a flight log as CSV, one column per :data:`FLAT_DTYPE` field; return the row count.
+
+    out_csv : a file path, or an open text stream (e.g. ``sys.stdout``)
 
     The header line names the columns (``t,imu_t,...,est_position_x,...``); floats
     are written with shortest round-trip precision, bools as 0/1, missing values
