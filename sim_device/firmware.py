@@ -43,6 +43,7 @@ SWITCH_ON = 4095
 SWITCH_OFF = 0
 
 BIT_PITCH, BIT_ROLL, BIT_YAW, BIT_THRUST = 0x1, 0x2, 0x4, 0x8
+_NEVER = 1 << 62
 
 
 def _clamp(value: int, lo: int, hi: int) -> int:
@@ -75,6 +76,9 @@ class Firmware:
         self.stalls: list[tuple[int, int]] = []  # (start, end) [ns] without DATA
         self.applied = Sticks()
         self.applied_mask = 0
+        self._expiry_ns = 0  # next time the arbitration must be redone [ns]
+        self._seen_sticks: Sticks | None = None
+        self._seen_switch: bool | None = None
         self.configs = 0
         self.commands = 0
         self.uplink_ignored = 0
@@ -91,6 +95,7 @@ class Firmware:
                 self.command = item
                 self.last_command_ns = t_ns
                 self.commands += 1
+                self._expiry_ns = t_ns  # re-arbitrate at this step
             elif isinstance(item, ConfigMsg):
                 self._configure(t_ns, item)
             else:  # a DATA frame or a rejected candidate: counted, otherwise ignored
@@ -114,8 +119,20 @@ class Firmware:
         return last is not None and t_ns - last < self._watchdog_ns
 
     def update_control(self, t_ns: int) -> None:
-        """Arbitrate every channel (command vs pilot) and pass changes to the plant."""
-        pilot = self.pilot.sticks_at(t_ns * 1e-9)
+        """Arbitrate every channel (command vs pilot) and pass changes to the plant.
+
+        Fast path: nothing to do while no command arrived, the pilot's sticks and
+        switch are the same objects/values as last time (no script) and the
+        watchdog has not expired.
+        """
+        pilot_state = self.pilot
+        if (t_ns < self._expiry_ns and pilot_state.script is None
+                and pilot_state.sticks is self._seen_sticks
+                and pilot_state.serial_enable is self._seen_switch):
+            return
+        self._seen_sticks = pilot_state.sticks
+        self._seen_switch = pilot_state.serial_enable
+        pilot = pilot_state.sticks_at(t_ns * 1e-9)
         cmd = self.command
         mask = 0
         if cmd is not None and self.pilot.serial_enable and self.serial_alive(t_ns):
@@ -133,6 +150,8 @@ class Firmware:
         if self.applied_mask and not mask:
             self.handbacks += 1
         self.applied_mask = mask
+        last = self.last_command_ns
+        self._expiry_ns = last + self._watchdog_ns if mask and last is not None else _NEVER
         if applied != self.applied:
             self._apply(applied)
 

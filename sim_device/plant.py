@@ -16,7 +16,9 @@ Dynamics, eq. 3.19-3.21::
     q_dot = 0.5 q ⊗ [0, omega]
     v_dot = (b * lift + I_i v_3)/m e_3 + bCe [0, 0, g] - omega × v
 
-with ``b(t) = 1 - droop * t / droop_time`` the battery factor (Ch. 5.2).
+with ``b(t) = 1 - droop * t / droop_time`` the battery factor (Ch. 5.2). The
+induced inflow ``I_i v_3`` (eq. 3.9) is a rotor effect: it acts while the motors
+turn (thrust stick > 0); with the motors stopped the vehicle falls freely.
 
 Integration: the two lags are first-order linear with the set point held over a
 step, so they are advanced exactly (``x += (sp - x)(1 - exp(-dt/tau))``) and
@@ -45,7 +47,8 @@ class Plant:
     """
 
     __slots__ = (
-        "_a_lift", "_a_lift_half", "_a_rate", "_a_rate_half", "_droop_rate", "_thrust_map",
+        "_a_lift", "_a_lift_half", "_a_rate", "_a_rate_half", "_droop_rate", "_inflow",
+        "_thrust_map",
         "dt", "lift", "lift_sp", "on_ground", "params",
         "px", "py", "pz", "q0", "q1", "q2", "q3", "t",
         "vx", "vy", "vz", "wx", "wx_sp", "wy", "wy_sp", "wz", "wz_sp",
@@ -69,6 +72,7 @@ class Plant:
         self.wx = self.wy = self.wz = 0.0
         self.wx_sp = self.wy_sp = self.wz_sp = 0.0
         self.lift = self.lift_sp = 0.0
+        self._inflow = 0.0  # I_i while the motors turn, 0 when stopped
         self.on_ground = self.pz >= 0.0
         if self.on_ground:
             self.pz = 0.0
@@ -77,9 +81,11 @@ class Plant:
     def set_inputs(self, wx: float, wy: float, wz: float, lift: float) -> None:
         """Hold new set points: body rates FRD [rad/s] and rotor lift [N] (negative = up).
 
-        ``lift`` already includes ``thrust_scale`` (see :meth:`lift_command`).
+        ``lift`` already includes ``thrust_scale`` (see :meth:`lift_command`); 0 means
+        the motors are stopped, which also removes the induced inflow (a rotor effect).
         """
         self.wx_sp, self.wy_sp, self.wz_sp, self.lift_sp = wx, wy, wz, lift
+        self._inflow = self.params.inflow if lift != 0.0 else 0.0
 
     def lift_command(self, thrust: int) -> float:
         """Lift set point [N] for a thrust stick: ``thrust_scale * F_lift(u)`` (eq. 3.7).
@@ -131,54 +137,36 @@ class Plant:
 
     def _rk4(self, dt: float, w0: tuple[float, float, float], wh: tuple[float, float, float],
              w1: tuple[float, float, float], f0: float, fh: float, f1: float) -> None:
-        """One RK4 step of (P, q, v) with rates and (battery-scaled) lift given at 0, dt/2, dt."""
-        x = (self.px, self.py, self.pz, self.q0, self.q1, self.q2, self.q3,
-             self.vx, self.vy, self.vz)
-        deriv = self._derivative
-        k1 = deriv(x, w0, f0)
-        h = 0.5 * dt
-        k2 = deriv(tuple([a + h * b for a, b in zip(x, k1, strict=True)]), wh, fh)
-        k3 = deriv(tuple([a + h * b for a, b in zip(x, k2, strict=True)]), wh, fh)
-        k4 = deriv(tuple([a + dt * b for a, b in zip(x, k3, strict=True)]), w1, f1)
-        s = dt / 6.0
-        px, py, pz, q0, q1, q2, q3, vx, vy, vz = [
-            a + s * (b1 + 2.0 * (b2 + b3) + b4)
-            for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4, strict=True)
-        ]
-        n = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-        self.px, self.py, self.pz = px, py, pz
-        self.q0, self.q1, self.q2, self.q3 = q0 * n, q1 * n, q2 * n, q3 * n
-        self.vx, self.vy, self.vz = vx, vy, vz
+        """One RK4 step of (P, q, v) with rates and (battery-scaled) lift given at 0, dt/2, dt.
 
-    def _derivative(self, x: tuple[float, ...], w: tuple[float, float, float],
-                    lift: float) -> tuple[float, ...]:
-        """Eq. 3.19-3.21 for state x = (P, q, v), rates w, lift [N] (battery applied)."""
-        _, _, _, q0, q1, q2, q3, vx, vy, vz = x
-        wx, wy, wz = w
-        p = self.params
-        # eCb (body -> NED), rows r0, r1, r2
-        r00 = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
-        r01 = 2.0 * (q1 * q2 - q0 * q3)
-        r02 = 2.0 * (q1 * q3 + q0 * q2)
-        r10 = 2.0 * (q1 * q2 + q0 * q3)
-        r11 = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
-        r12 = 2.0 * (q2 * q3 - q0 * q1)
-        r20 = 2.0 * (q1 * q3 - q0 * q2)
-        r21 = 2.0 * (q2 * q3 + q0 * q1)
-        r22 = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
-        g = p.g
-        return (
-            r00 * vx + r01 * vy + r02 * vz,
-            r10 * vx + r11 * vy + r12 * vz,
-            r20 * vx + r21 * vy + r22 * vz,
-            0.5 * (-wx * q1 - wy * q2 - wz * q3),
-            0.5 * (wx * q0 + wz * q2 - wy * q3),
-            0.5 * (wy * q0 - wz * q1 + wx * q3),
-            0.5 * (wz * q0 + wy * q1 - wx * q2),
-            g * r20 - (wy * vz - wz * vy),
-            g * r21 - (wz * vx - wx * vz),
-            g * r22 + (lift + p.inflow * vz) / p.mass - (wx * vy - wy * vx),
-        )
+        Unrolled scalar stages: the position does not feed back, so a stage state is (q, v).
+        """
+        g = self.params.g
+        inv_m = 1.0 / self.params.mass
+        c = self._inflow * inv_m
+        q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
+        vx, vy, vz = self.vx, self.vy, self.vz
+        h = 0.5 * dt
+        a = _derivative(q0, q1, q2, q3, vx, vy, vz, *w0, f0 * inv_m, c, g)
+        b = _derivative(q0 + h * a[3], q1 + h * a[4], q2 + h * a[5], q3 + h * a[6],
+                        vx + h * a[7], vy + h * a[8], vz + h * a[9], *wh, fh * inv_m, c, g)
+        d = _derivative(q0 + h * b[3], q1 + h * b[4], q2 + h * b[5], q3 + h * b[6],
+                        vx + h * b[7], vy + h * b[8], vz + h * b[9], *wh, fh * inv_m, c, g)
+        e = _derivative(q0 + dt * d[3], q1 + dt * d[4], q2 + dt * d[5], q3 + dt * d[6],
+                        vx + dt * d[7], vy + dt * d[8], vz + dt * d[9], *w1, f1 * inv_m, c, g)
+        s = dt / 6.0
+        self.px += s * (a[0] + 2.0 * (b[0] + d[0]) + e[0])
+        self.py += s * (a[1] + 2.0 * (b[1] + d[1]) + e[1])
+        self.pz += s * (a[2] + 2.0 * (b[2] + d[2]) + e[2])
+        q0 += s * (a[3] + 2.0 * (b[3] + d[3]) + e[3])
+        q1 += s * (a[4] + 2.0 * (b[4] + d[4]) + e[4])
+        q2 += s * (a[5] + 2.0 * (b[5] + d[5]) + e[5])
+        q3 += s * (a[6] + 2.0 * (b[6] + d[6]) + e[6])
+        self.vx = vx + s * (a[7] + 2.0 * (b[7] + d[7]) + e[7])
+        self.vy = vy + s * (a[8] + 2.0 * (b[8] + d[8]) + e[8])
+        self.vz = vz + s * (a[9] + 2.0 * (b[9] + d[9]) + e[9])
+        n = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+        self.q0, self.q1, self.q2, self.q3 = q0 * n, q1 * n, q2 * n, q3 * n
 
     def land(self) -> None:
         """Rest on the floor: z = 0, no velocity or rates, level with the same heading."""
@@ -212,7 +200,7 @@ class Plant:
             g = p.g
             return (-g * 2.0 * (q1 * q3 - q0 * q2), -g * 2.0 * (q2 * q3 + q0 * q1),
                     -g * (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3))
-        return (0.0, 0.0, (self.battery_factor() * self.lift + p.inflow * self.vz) / p.mass)
+        return (0.0, 0.0, (self.battery_factor() * self.lift + self._inflow * self.vz) / p.mass)
 
     def velocity_ned(self) -> tuple[float, float, float]:
         """Velocity relative to earth in NED axes [m/s] (eCb v)."""
@@ -226,6 +214,31 @@ class Plant:
             2.0 * (q1 * q3 - q0 * q2) * vx + 2.0 * (q2 * q3 + q0 * q1) * vy
             + (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) * vz,
         )
+
+
+def _derivative(q0: float, q1: float, q2: float, q3: float, vx: float, vy: float, vz: float,
+                wx: float, wy: float, wz: float, lift_m: float, inflow_m: float,
+                g: float) -> tuple[float, ...]:
+    """Eq. 3.19-3.21: (P_dot (3), q_dot (4), v_dot (3)) for attitude q, body velocity v,
+    rates w, lift / m [m/s^2] (battery applied) and I_i / m [1/s] (0 with motors off)."""
+    # eCb (body -> NED), rows r0, r1, r2
+    r20 = 2.0 * (q1 * q3 - q0 * q2)
+    r21 = 2.0 * (q2 * q3 + q0 * q1)
+    r22 = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+    return (
+        (q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) * vx + 2.0 * (q1 * q2 - q0 * q3) * vy
+        + 2.0 * (q1 * q3 + q0 * q2) * vz,
+        2.0 * (q1 * q2 + q0 * q3) * vx + (q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3) * vy
+        + 2.0 * (q2 * q3 - q0 * q1) * vz,
+        r20 * vx + r21 * vy + r22 * vz,
+        0.5 * (-wx * q1 - wy * q2 - wz * q3),
+        0.5 * (wx * q0 + wz * q2 - wy * q3),
+        0.5 * (wy * q0 - wz * q1 + wx * q3),
+        0.5 * (wz * q0 + wy * q1 - wx * q2),
+        g * r20 - (wy * vz - wz * vy),
+        g * r21 - (wz * vx - wx * vz),
+        g * r22 + lift_m + inflow_m * vz - (wx * vy - wy * vx),
+    )
 
 
 def _lag_gain(dt: float, tau: float) -> float:
