@@ -130,30 +130,34 @@ class Firmware:
                 and pilot_state.sticks is self._seen_sticks
                 and pilot_state.serial_enable is self._seen_switch):
             return
-        self._seen_sticks = pilot_state.sticks
-        self._seen_switch = pilot_state.serial_enable
-        pilot = pilot_state.sticks_at(t_ns * 1e-9)
         cmd = self.command
         mask = 0
-        if cmd is not None and self.pilot.serial_enable and self.serial_alive(t_ns):
+        if cmd is not None and pilot_state.serial_enable and self.serial_alive(t_ns):
             mask = cmd.ctrl
-        if mask:
-            assert cmd is not None
-            applied = Sticks(
-                roll=cmd.roll if mask & BIT_ROLL else pilot.roll,
-                pitch=cmd.pitch if mask & BIT_PITCH else pilot.pitch,
-                yaw=cmd.yaw if mask & BIT_YAW else pilot.yaw,
-                thrust=cmd.thrust if mask & BIT_THRUST else pilot.thrust,
-            )
-        else:
-            applied = pilot
+        if self.applied_mask & BIT_THRUST and not mask & BIT_THRUST and not self.plant.on_ground:
+            pilot_state.take_over_thrust(self.applied.thrust)
         if self.applied_mask and not mask:
             self.handbacks += 1
         self.applied_mask = mask
         last = self.last_command_ns
         self._expiry_ns = last + self._watchdog_ns if mask and last is not None else _NEVER
+        self._seen_sticks = pilot_state.sticks
+        self._seen_switch = pilot_state.serial_enable
+        applied = self._arbitrate(mask, pilot_state.sticks_at(t_ns * 1e-9))
         if applied != self.applied:
             self._apply(applied)
+
+    def _arbitrate(self, mask: int, pilot: Sticks) -> Sticks:
+        """Command values on the channels in ``mask``, the pilot's sticks on the others."""
+        cmd = self.command
+        if not mask or cmd is None:
+            return pilot
+        return Sticks(
+            roll=cmd.roll if mask & BIT_ROLL else pilot.roll,
+            pitch=cmd.pitch if mask & BIT_PITCH else pilot.pitch,
+            yaw=cmd.yaw if mask & BIT_YAW else pilot.yaw,
+            thrust=cmd.thrust if mask & BIT_THRUST else pilot.thrust,
+        )
 
     def _apply(self, sticks: Sticks) -> None:
         roll = _clamp(sticks.roll, -2048, 2047)

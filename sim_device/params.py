@@ -22,7 +22,7 @@ import numpy.typing as npt
 from groundstation.errors import ConfigError
 
 if TYPE_CHECKING:
-    from groundstation.config import GroundStationConfig
+    from groundstation.config import GroundStationConfig, SimConfig
 
 Vec3 = tuple[float, float, float]
 LossEncoding = Literal["missing", "zero", "held-identity"]
@@ -234,11 +234,15 @@ class PilotParams:
     thrust : thrust stick the pilot holds (0 = motors off, vehicle on the floor)
     serial_enable : the RC serial-enable switch (commands apply only when on)
     rc_link : the RC link is valid (STATUS flag bit 2)
+    hold_thrust : when the thrust channel falls back to the pilot while airborne
+        (watchdog, switch, mask-0 COMMAND), the pilot holds the thrust applied at
+        that moment, rate sticks neutral, instead of jumping to ``thrust``
     """
 
     thrust: int = 0
     serial_enable: bool = True
     rc_link: bool = True
+    hold_thrust: bool = True
 
     def __post_init__(self) -> None:
         _require(0 <= self.thrust <= 4096, "pilot.thrust", self.thrust, "in 0..4096")
@@ -269,48 +273,64 @@ class LabParams:
 
     @classmethod
     def from_config(cls, config: GroundStationConfig) -> LabParams:
-        """Parameters from a validated configuration (``sim`` may be absent: defaults)."""
+        """Parameters from a validated configuration (``sim`` may be absent: defaults).
+
+        Fields without a configuration key keep their defaults: plant.thrust_tau,
+        faults.data_delay, the Vicon volume, imu.gyro_saturation/pressure_noise,
+        link.watchdog (the spec's 100 ms) and pilot.hold_thrust.
+        """
         from groundstation.config import SimConfig
 
         sim = config.sim if config.sim is not None else SimConfig()
-        veh = config.vehicle
-        v3 = _vec3
-        plant = PlantParams(
-            mass=veh.mass_kg, g=veh.gravity, k_rate=v3(veh.k_rate),
-            thrust_poly=tuple(veh.thrust_poly), inflow=veh.induced_inflow,
-            rate_tau=sim.rate_loop_tau_s, thrust_scale=sim.thrust_scale,
-            battery_droop=sim.battery_droop, battery_droop_time=sim.battery_droop_time_s,
-            initial_position=v3(sim.initial_position),
-            initial_yaw=math.radians(sim.initial_yaw_deg),
-        )
-        imu = ImuParams(
-            gyro_scale=v3(veh.gyro_scale), acc_scale=v3(veh.acc_scale),
-            gyro_zero=v3(veh.gyro_zero), acc_zero=v3(veh.acc_zero),
-            gyro_variance=v3(veh.gyro_variance), acc_variance=v3(veh.acc_variance),
-            gyro_bias=v3(sim.gyro_bias), acc_bias=v3(sim.acc_bias),
-            scale_error=sim.scale_error, acc_saturation=veh.acc_saturation,
-        )
-        link = LinkParams(baud=config.serial.baud, crc_profile=config.serial.crc_profile,
-                          command_delay=sim.command_delay_s, battery_mv=sim.battery_mv)
         f = sim.faults
-        faults = FaultParams(corruption_rate=f.corruption_rate, drop_rate=f.drop_rate,
-                             stall_at=f.stall_at_s, stall_duration=f.stall_duration_s,
-                             burst_period=f.burst_delay_s)
-        sv, vc = sim.vicon, config.vicon
-        vicon = ViconSimParams(
-            rate_hz=sv.rate_hz, latency=sv.latency_s, noise=sv.noise,
-            position_variance=v3(veh.vicon_position_variance),
-            quaternion_variance=_vec4(veh.vicon_quaternion_variance),
-            loss_encoding=sv.loss_encoding,
-            outages=tuple((float(start), float(length)) for start, length in sv.outages),
-            tilt_limit_deg=sv.tilt_limit_deg, object_name=vc.object_name, pad_to=sv.pad_to,
-            world_to_ned=_mat3(vc.world_to_ned.as_matrix()),
-            body_to_object=_mat3(vc.body_to_object.as_matrix()),
+        return cls(
+            dt=sim.dt_s, seed=sim.seed, plant=_plant_params(config, sim),
+            imu=_imu_params(config, sim), vicon=_vicon_params(config, sim),
+            link=LinkParams(baud=config.serial.baud, crc_profile=config.serial.crc_profile,
+                            command_delay=sim.command_delay_s, battery_mv=sim.battery_mv),
+            faults=FaultParams(corruption_rate=f.corruption_rate, drop_rate=f.drop_rate,
+                               stall_at=f.stall_at_s, stall_duration=f.stall_duration_s,
+                               burst_period=f.burst_delay_s),
+            pilot=PilotParams(thrust=sim.pilot_thrust, serial_enable=sim.serial_enable,
+                              rc_link=sim.rc_link),
         )
-        pilot = PilotParams(thrust=sim.pilot_thrust, serial_enable=sim.serial_enable,
-                            rc_link=sim.rc_link)
-        return cls(dt=sim.dt_s, seed=sim.seed, plant=plant, imu=imu, link=link, faults=faults,
-                   vicon=vicon, pilot=pilot)
+
+
+def _plant_params(config: GroundStationConfig, sim: SimConfig) -> PlantParams:
+    veh = config.vehicle
+    return PlantParams(
+        mass=veh.mass_kg, g=veh.gravity, k_rate=_vec3(veh.k_rate),
+        thrust_poly=tuple(veh.thrust_poly), inflow=veh.induced_inflow,
+        rate_tau=sim.rate_loop_tau_s, thrust_scale=sim.thrust_scale,
+        battery_droop=sim.battery_droop, battery_droop_time=sim.battery_droop_time_s,
+        initial_position=_vec3(sim.initial_position),
+        initial_yaw=math.radians(sim.initial_yaw_deg),
+    )
+
+
+def _imu_params(config: GroundStationConfig, sim: SimConfig) -> ImuParams:
+    veh = config.vehicle
+    return ImuParams(
+        gyro_scale=_vec3(veh.gyro_scale), acc_scale=_vec3(veh.acc_scale),
+        gyro_zero=_vec3(veh.gyro_zero), acc_zero=_vec3(veh.acc_zero),
+        gyro_variance=_vec3(veh.gyro_variance), acc_variance=_vec3(veh.acc_variance),
+        gyro_bias=_vec3(sim.gyro_bias), acc_bias=_vec3(sim.acc_bias),
+        scale_error=sim.scale_error, acc_saturation=veh.acc_saturation,
+    )
+
+
+def _vicon_params(config: GroundStationConfig, sim: SimConfig) -> ViconSimParams:
+    sv, vc = sim.vicon, config.vicon
+    return ViconSimParams(
+        rate_hz=sv.rate_hz, latency=sv.latency_s, noise=sv.noise,
+        position_variance=_vec3(config.vehicle.vicon_position_variance),
+        quaternion_variance=_vec4(config.vehicle.vicon_quaternion_variance),
+        loss_encoding=sv.loss_encoding,
+        outages=tuple((float(start), float(length)) for start, length in sv.outages),
+        tilt_limit_deg=sv.tilt_limit_deg, object_name=vc.object_name, pad_to=sv.pad_to,
+        world_to_ned=_mat3(vc.world_to_ned.as_matrix()),
+        body_to_object=_mat3(vc.body_to_object.as_matrix()),
+    )
 
 
 def _vec3(values: list[float] | tuple[float, ...]) -> Vec3:

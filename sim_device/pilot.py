@@ -1,7 +1,9 @@
 """The RC pilot of the virtual lab: a stick source the tests and the lab can script.
 
-By default the pilot holds neutral rate sticks and a fixed thrust stick (the
-"holding thrust" of ``sim.pilot_thrust``; 0 keeps the motors off on the floor).
+By default the pilot holds neutral rate sticks and a fixed thrust stick
+(``sim.pilot_thrust``; 0 keeps the motors off on the floor). When the vehicle
+falls back to the pilot in the air, the pilot holds the thrust it had (neutral
+rates, holding thrust), like a safety pilot whose stick sits near hover.
 A script ``t -> Sticks`` replaces the fixed sticks, e.g. a manual take-off.
 The pilot also owns the serial-enable switch (commands apply only while it is
 on) and the RC link flag reported in STATUS.
@@ -24,9 +26,10 @@ class Pilot:
     sticks : held sticks (thesis meaning: positive roll/pitch/yaw = positive FRD rate)
     script : when set, overrides ``sticks`` with ``script(t)``
     serial_enable : RC serial-enable switch; rc_link : RC link valid
+    hold_thrust : take over the applied thrust when given the thrust channel in the air
     """
 
-    __slots__ = ("rc_link", "script", "serial_enable", "sticks")
+    __slots__ = ("hold_thrust", "rc_link", "script", "serial_enable", "sticks")
 
     def __init__(self, params: PilotParams | None = None) -> None:
         params = params if params is not None else PilotParams()
@@ -34,6 +37,12 @@ class Pilot:
         self.script: StickScript | None = None
         self.serial_enable = params.serial_enable
         self.rc_link = params.rc_link
+        self.hold_thrust = params.hold_thrust
+
+    def take_over_thrust(self, thrust: int) -> None:
+        """The thrust channel came back in flight: hold ``thrust``, rate sticks neutral."""
+        if self.hold_thrust and self.script is None:
+            self.sticks = Sticks(thrust=thrust)
 
     def sticks_at(self, t: float) -> Sticks:
         """The pilot's sticks at simulated time ``t`` [s]."""

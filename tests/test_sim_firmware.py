@@ -20,7 +20,7 @@ from groundstation.asctec.decoder import encode_frame
 from groundstation.asctec.messages import CommandMsg, ConfigMsg, DataMsg
 from groundstation.model.sensors import ImuScaling
 from groundstation.types import Sticks
-from sim_device import ImuParams, LabParams, PlantParams, VirtualLab
+from sim_device import ImuParams, LabParams, PilotParams, PlantParams, VirtualLab
 
 DT = 0.002
 COMMAND_TIME = 23 * 10 / 57600  # COMMAND frame on the wire at the default baud [s]
@@ -192,3 +192,26 @@ def test_accelerometer_saturates_at_14_and_adc_clips_at_12_bits() -> None:
     # 2.25 rad/s at a 0.0005 rad/s-per-count scale is past the 12-bit range
     late = msgs[-5:]
     assert all(m.gyro is not None and (m.gyro.x, m.gyro.y) == (4095, 0) for m in late)
+
+
+@pytest.mark.parametrize("hold", [True, False])
+def test_pilot_holds_thrust_when_the_vehicle_falls_back_in_flight(hold: bool) -> None:
+    lab = make_lab(pilot=PilotParams(hold_thrust=hold))
+    lab.place((0.0, 0.0, -1.0))
+    lab.send(CommandMsg(roll=200, thrust=2050, ctrl=0x0F))  # one command, then silence
+    lab.advance(0.3)
+    truth = lab.truth
+    assert truth.ctrl_mask == 0 and lab.stats().handbacks == 1
+    if hold:  # neutral rates, thrust held: it keeps flying
+        assert truth.sticks == Sticks(thrust=2050)
+        assert truth.velocity[2] < 0.5
+    else:  # the configured pilot thrust (0): motors stop, it falls
+        assert truth.sticks == Sticks()
+        assert truth.velocity[2] > 1.0
+
+
+def test_pilot_thrust_on_the_floor_is_not_held() -> None:
+    lab = make_lab()
+    lab.send(CommandMsg(thrust=1500, ctrl=0x0F))  # below hover: stays on the floor
+    lab.advance(0.3)
+    assert lab.truth.on_ground and lab.truth.sticks == Sticks()
