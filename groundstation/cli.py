@@ -70,20 +70,85 @@ def fly(
     serial_port: Annotated[str | None, typer.Option(help="Serial device or URL.")] = None,
     vicon_port: Annotated[int | None, typer.Option(help="Vicon UDP port.")] = None,
     vicon_object: Annotated[str | None, typer.Option(help="Vicon object name.")] = None,
-    trajectory: Annotated[str | None, typer.Option(help="Trajectory name.")] = None,
+    trajectory: Annotated[str | None, typer.Option(
+        help="hover|step-x|step-y|step-z|square|yz-rectangle|low-hover|figure-eight, "
+             "or a waypoint CSV file.")] = None,
     controller: Annotated[str | None, typer.Option(help="lqr-cv|lqr-cp|pid|hinf")] = None,
-    duration: Annotated[float | None, typer.Option(help="Seconds on the trajectory.")] = None,
+    duration: Annotated[float | None, typer.Option(
+        help="Seconds on the trajectory before landing (default: one period).")] = None,
     log_dir: Annotated[Path | None, typer.Option(help="Flight-log directory.")] = None,
-    demo: Annotated[bool, typer.Option(help="Also start the virtual lab (sim config).")] = False,
+    demo: Annotated[bool, typer.Option(
+        help="Start the virtual lab (needs a `sim:` section) and fly it.")] = False,
 ) -> None:
-    """Fly: preflight, take off, track the trajectory, land, hand back to the pilot."""
-    cfg = load(config, {
+    """Fly: preflight, take off, track the trajectory, land, hand back to the pilot.
+
+    Exit code 0 after a normal landing and handover (or a requested stop), 1 on
+    any other end (failsafe, pilot takeover, link loss, failed preflight).
+    """
+    overrides: dict[str, Any] = {
         "serial.port": serial_port, "vicon.port": vicon_port, "vicon.object_name": vicon_object,
-        "trajectory.name": trajectory, "controller.type": controller,
+        "controller.type": controller,
         "logging.flight_log_dir": str(log_dir) if log_dir else None,
-    })
-    del cfg, duration, demo
-    raise _fail("the flight loop is not built yet (issue 8); see README 'Status'", 1)
+    }
+    if trajectory is not None and Path(trajectory).suffix.lower() == ".csv":
+        overrides["trajectory.name"] = "waypoints"
+        overrides["trajectory.file"] = trajectory
+    else:
+        overrides["trajectory.name"] = trajectory
+    cfg = load(config, overrides)
+    from groundstation.loop.flight import fly_command
+
+    raise typer.Exit(fly_command(cfg, duration_s=duration, demo=demo, echo=typer.echo))
+
+
+@app.command("sim-device")
+def sim_device(
+    config: ConfigOption,
+    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds.")] = None,
+    truth_file: Annotated[Path | None, typer.Option(help="Ground-truth .npz path.")] = None,
+) -> None:
+    """Run the virtual X-3D (pty) and virtual Vicon (UDP) in real time until Ctrl-C.
+
+    Prints the pty path to use as ``--serial-port`` and the Vicon UDP target, and
+    writes the ground truth on exit (also on SIGINT/SIGTERM).
+    """
+    cfg = load(config)
+    from sim_device.realtime import run_sim_device
+
+    run_sim_device(cfg, truth_file=truth_file, duration=duration, announce=typer.echo)
+
+
+@app.command()
+def export(
+    log: Annotated[Path, typer.Argument(help="Flight-log directory or its flight.npy.")],
+    out: Annotated[Path | None, typer.Option(help="CSV file (default: stdout).")] = None,
+) -> None:
+    """Export a flight log as CSV (one column per value)."""
+    import sys
+
+    from groundstation.loop.recorder import export_csv
+
+    try:
+        rows = export_csv(log, out if out is not None else sys.stdout)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 1) from exc
+    if out is not None:
+        typer.echo(f"{rows} rows written to {out}", err=True)
+
+
+@app.command()
+def monitor(
+    endpoint: Annotated[str, typer.Option(help="Telemetry endpoint to subscribe to.")] =
+        "tcp://127.0.0.1:5556",
+    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds.")] = None,
+) -> None:
+    """Live terminal view of a flying ground station's telemetry (Ctrl-C to quit)."""
+    from groundstation.telemetry.monitor import run_monitor
+
+    try:
+        run_monitor(endpoint, duration)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 1) from exc
 
 
 @identify_app.command("thrust")

@@ -98,7 +98,8 @@ class SerialConfig(_Model):
     port: str = "/dev/ttyUSB0"  # the lab's XBee adapter; a pty path or pyserial URL also works
     baud: int = Field(57600, gt=0)  # spec section 1 default (design choice)
     crc_profile: Literal["asctec", "kermit", "mcrf4xx"] = "asctec"  # spec section 2
-    sensors: list[SensorBlock] = Field(default_factory=_default_sensors)  # STATUS+GYRO+ACC+RC = 41 B/frame, 71% of 57600 baud at 100 Hz (spec section 6)
+    sensors: list[SensorBlock] = Field(default_factory=_default_sensors)
+    # STATUS+GYRO+ACC+RC = 41 B/frame, 71% of 57600 baud at 100 Hz (spec section 6)
     data_period_ms: int = Field(10, ge=1, le=1000)  # 100 Hz IMU, thesis Ch. 1.2.2
     command_rate_hz: float = Field(50.0, ge=20.0, le=100.0)
     # 50 Hz: spec section 4 target 50-100 Hz; thesis flew 33 Hz over XBee (App. A.3).

@@ -99,7 +99,8 @@ class FlightCore:
         duration = duration_s if duration_s is not None else config.trajectory.period_s
         self.mission = Mission(self.trajectory.sample, duration,
                                climb_speed=config.safety.takeoff_speed_m_s,
-                               land_speed=config.safety.land_speed_m_s)
+                               land_speed=config.safety.land_speed_m_s,
+                               spool_s=config.serial.handover_blend_s)
         self.supervisor = Supervisor(limits_from_config(config))
         self.handover = ChannelHandover(blend_time=config.serial.handover_blend_s)
         self._auto = tuple(config.channels.auto)

@@ -2,13 +2,15 @@
 
 Pure and clock-free: the flight core passes the time and the supervisor state.
 
-* TAKEOFF: climb vertically from the ground position to the trajectory's start
+* TAKEOFF: stay on the ground for ``spool_s`` (the thrust channel is still
+  blending from the pilot's stick, so a climbing reference would only build up
+  error), climb vertically from the ground position to the trajectory's start
   height at ``climb_speed``, then move horizontally to the trajectory's start
   point at the same speed. Take-off is done when the path is complete and the
   vehicle is within ``tolerance`` of the start point.
 * TRACK: the trajectory, on its own time axis, paused while in HOLD.
 * HOLD: the position where the hold began, zero velocity.
-* LAND: descend from where landing began at ``land_speed`` to just below the
+* LAND: descend from where landing began at ``land_speed`` (same profile) to just below the
   ground height (so the vehicle really touches down), then stay there.
 * DISARM and the rest: the ground point.
 
@@ -17,6 +19,7 @@ All positions NED [m], velocities [m/s].
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -30,26 +33,52 @@ TrajectoryFn = Callable[[float], Reference]
 
 @dataclass(frozen=True, slots=True)
 class _Segment:
-    """Constant-speed straight line from ``start`` to ``end`` beginning at ``t0``."""
+    """Straight line from ``start`` to ``end`` beginning at ``t0``, trapezoidal speed.
+
+    Accelerates at ``accel`` to ``speed``, cruises, and decelerates to rest, so the
+    reference never asks for an infinite acceleration (a velocity step makes a
+    controller that feeds the reference velocity forward overshoot, Ch. 11.3).
+    Short segments never reach ``speed`` (triangular profile).
+    """
 
     t0: float
     start: FloatArray
     end: FloatArray
     speed: float
+    accel: float = 0.5
+
+    @property
+    def length(self) -> float:
+        return float(np.linalg.norm(self.end - self.start))
+
+    @property
+    def _peak(self) -> float:
+        return min(self.speed, math.sqrt(self.accel * self.length))
 
     @property
     def duration(self) -> float:
-        return float(np.linalg.norm(self.end - self.start)) / self.speed
+        if self.length == 0.0:
+            return 0.0
+        v = self._peak
+        return 2.0 * v / self.accel + (self.length - v * v / self.accel) / v
 
     def at(self, t: float) -> tuple[FloatArray, FloatArray]:
         """Position and velocity at time t (clamped to the segment)."""
-        length = float(np.linalg.norm(self.end - self.start))
+        length = self.length
         if length == 0.0:
             return self.end.copy(), np.zeros(3)
-        s = min(max((t - self.t0) * self.speed, 0.0), length)
+        v, a, T = self._peak, self.accel, self.duration
+        tau = min(max(t - self.t0, 0.0), T)
+        t_acc = v / a
+        if tau < t_acc:
+            s, ds = 0.5 * a * tau * tau, a * tau
+        elif tau > T - t_acc:
+            rest = T - tau
+            s, ds = length - 0.5 * a * rest * rest, a * rest
+        else:
+            s, ds = 0.5 * v * t_acc + v * (tau - t_acc), v
         direction = (self.end - self.start) / length
-        moving = 0.0 < (t - self.t0) * self.speed < length
-        return self.start + s * direction, direction * self.speed if moving else np.zeros(3)
+        return self.start + s * direction, direction * ds
 
 
 class Mission:
@@ -62,13 +91,14 @@ class Mission:
 
     def __init__(self, trajectory: TrajectoryFn, duration_s: float, climb_speed: float = 0.5,
                  land_speed: float = 0.3, tolerance: float = 0.1,
-                 touchdown_depth: float = 0.1) -> None:
+                 touchdown_depth: float = 0.1, spool_s: float = 0.0) -> None:
         self._trajectory = trajectory
         self.duration_s = duration_s
         self._climb = climb_speed
         self._land = land_speed
         self._tol = tolerance
         self._depth = touchdown_depth
+        self._spool = spool_s
         self._state = State.PREFLIGHT
         self._ground = np.zeros(3)
         self._path: list[_Segment] = []
@@ -93,8 +123,9 @@ class Mission:
             self._ground = position.copy()
             start = self._trajectory(0.0).position
             above = np.array([position[0], position[1], start[2]])
-            first = _Segment(t, position.copy(), above, self._climb)
-            self._path = [first, _Segment(t + first.duration, above, start.copy(), self._climb)]
+            first = _Segment(t + self._spool, position.copy(), above, self._climb)
+            second = _Segment(first.t0 + first.duration, above, start.copy(), self._climb)
+            self._path = [first, second]
         elif state is State.HOLD:
             self._hold_point = position.copy()
         elif state is State.LAND:
@@ -125,6 +156,7 @@ class Mission:
             return self._trajectory(self._track_clock)
         if state in (State.TAKEOFF, State.LAND) and self._path:
             seg = next((s for s in self._path if t < s.t0 + s.duration), self._path[-1])
+            # before the first segment starts, at() clamps to its start: the ground
             pos, vel = seg.at(t)
             return Reference(t, pos, vel)
         if state is State.HOLD:

@@ -1,0 +1,298 @@
+"""The real-time flight daemon behind ``gs fly``.
+
+Owns every thread, socket and clock of a flight: the serial link (reader and
+keep-alive threads), the Vicon client (reader thread), the flight recorder, the
+telemetry publisher, systemd notification and the signal handlers. Each tick it
+hands the sans-IO :class:`~groundstation.loop.core.FlightCore` one DATA sample
+and the Vicon poses that arrived since the last tick.
+
+Scheduling: one tick per DATA sample (100 Hz). If no DATA arrives within 1.5
+periods of the last tick, the loop ticks anyway (without an IMU sample) so a
+stalled stream still reaches the supervisor's link-loss failsafe.
+
+Timing per tick (recorded, summarised in :class:`FlightSummary`):
+
+* compute: wall time from the tick's start to the end of its work;
+* jitter: the tick's interval minus the DATA period (0 on a perfect schedule);
+* latency: DATA frame received (reader thread's time stamp) to COMMAND written.
+
+Stopping: the first SIGINT/SIGTERM asks the supervisor to land (or hand back,
+see ``safety.on_signal``), a second one hands back at once. Whatever the way
+out, the link sends a final COMMAND with ctrl mask 0, the flight log is flushed
+and closed, and systemd hears STOPPING.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass, field
+from functools import partial
+from types import FrameType
+
+import numpy as np
+import structlog
+
+from groundstation.asctec.link import SerialLink
+from groundstation.asctec.messages import ConfigMsg, DataMsg
+from groundstation.config import GroundStationConfig, dump_config
+from groundstation.loop.core import FlightCore, TickResult
+from groundstation.loop.inputs import DataFrontEnd
+from groundstation.loop.recorder import FlightRecorder
+from groundstation.loop.sdnotify import SdNotifier
+from groundstation.loop.supervisor import State, Transition
+from groundstation.telemetry.publisher import TelemetryPublisher
+from groundstation.telemetry.schema import health_payload, state_payload
+from groundstation.types import ImuSample, Pose
+from groundstation.vicon.client import ViconClient
+
+log = structlog.get_logger(__name__)
+
+RESEND_CONFIG_AFTER_S = 0.5
+"""Re-send CONFIG when no DATA arrived for this long (spec 3.1: stream stopped)."""
+
+
+@dataclass
+class FlightSummary:
+    """What a flight did, for the CLI's closing lines and the benchmarks.
+
+    final_state, success : the supervisor's terminal state; True for a normal end
+    transitions : every state change with its reason
+    log_dir : the flight log directory
+    track_rms_m, track_max_m : estimate-vs-reference 3-D error while tracking [m]
+    compute_s, jitter_s, latency_s : per-tick timing samples [s]
+    commands_sent, ticks : counters
+    """
+
+    final_state: State
+    success: bool
+    transitions: list[Transition]
+    log_dir: str
+    track_rms_m: float
+    track_max_m: float
+    compute_s: np.ndarray
+    jitter_s: np.ndarray
+    latency_s: np.ndarray
+    commands_sent: int
+    ticks: int
+
+    def percentiles(self) -> dict[str, tuple[float, float]]:
+        """p50 and p99 of compute time, |jitter| and latency [s]."""
+        out = {}
+        for name, values in (("compute", self.compute_s), ("jitter", np.abs(self.jitter_s)),
+                             ("latency", self.latency_s)):
+            if values.size:
+                out[name] = (float(np.percentile(values, 50)), float(np.percentile(values, 99)))
+            else:
+                out[name] = (math.nan, math.nan)
+        return out
+
+
+@dataclass
+class _Stats:
+    compute: list[float] = field(default_factory=list)
+    jitter: list[float] = field(default_factory=list)
+    latency: list[float] = field(default_factory=list)
+    track_sq: float = 0.0
+    track_max: float = 0.0
+    track_n: int = 0
+    sent: int = 0
+    ticks: int = 0
+
+
+@contextmanager
+def _signals(counter: list[int]) -> Iterator[None]:
+    """Count SIGINT/SIGTERM into ``counter[0]`` (main thread only; elsewhere a no-op)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        counter[0] += 1
+        log.warning("signal", signal=signal.Signals(signum).name, count=counter[0])
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+class FlightDaemon:
+    """One real-time flight. Build it, then :meth:`run` it (blocks until the flight ends).
+
+    config : validated configuration (``serial.port`` is the X-3D)
+    duration_s : trajectory time before landing (default one trajectory period)
+    progress : called about once a second with a one-line status
+    stop : an extra way to ask for a stop (counts like a signal), e.g. from a test
+    """
+
+    def __init__(self, config: GroundStationConfig, *, duration_s: float | None = None,
+                 progress: Callable[[str], None] | None = None,
+                 stop: threading.Event | None = None) -> None:
+        self.config = config
+        self.core = FlightCore(config, duration_s=duration_s)
+        self._front = DataFrontEnd(config)
+        self._progress = progress
+        self._stop_event = stop
+        self._signals = [0]
+        self._period = config.serial.data_period_ms / 1000.0
+        self._config_msg = ConfigMsg(config.serial.sensor_mask, config.serial.data_period_ms)
+        self._stats = _Stats()
+        self._last_imu: ImuSample | None = None
+        self._last_raw: DataMsg | None = None
+        self.log_dir = ""
+
+    @property
+    def stop_requests(self) -> int:
+        """Signals received plus one if the stop event is set."""
+        extra = 1 if self._stop_event is not None and self._stop_event.is_set() else 0
+        return self._signals[0] + extra
+
+    def run(self) -> FlightSummary:
+        """Fly. Raises LinkError/ViconError/GroundStationError if a resource cannot be opened;
+        once flying, failures are supervisor transitions and the flight ends with a summary."""
+        cfg = self.config
+        notifier = SdNotifier.from_env()
+        with ExitStack() as stack:
+            stack.callback(notifier.stopping, "stopping: vehicle handed back")
+            link = SerialLink.from_config(cfg.serial)
+            stack.callback(link.close)  # sends the final COMMAND with ctrl mask 0
+            vicon = ViconClient.from_config(cfg.vicon).start()
+            stack.callback(vicon.close)
+            recorder = FlightRecorder.create(cfg.logging.flight_log_dir, dump_config(cfg),
+                                             {"supervisor_states": [s.name for s in State]})
+            stack.callback(recorder.close)
+            self.log_dir = str(recorder.directory)
+            telemetry = TelemetryPublisher.from_config(cfg.telemetry)
+            stack.callback(telemetry.close)
+            stack.enter_context(_signals(self._signals))
+            link.send(self._config_msg)
+            notifier.ready("preflight")
+            log.info("flight starting", port=cfg.serial.port, vicon_port=cfg.vicon.port,
+                     log=self.log_dir, controller=cfg.controller.type)
+            self._loop(link, vicon, recorder, telemetry, notifier)
+        return self._summary()
+
+    # ------------------------------------------------------------------ the loop
+    def _loop(self, link: SerialLink, vicon: ViconClient, recorder: FlightRecorder,
+              telemetry: TelemetryPublisher, notifier: SdNotifier) -> None:
+        core = self.core
+        wd_interval = notifier.watchdog_interval()
+        next_wd = next_progress = last_config = -math.inf
+        t_prev = time.monotonic()
+        while not core.supervisor.terminal:
+            rx = link.get(timeout=max(0.0, t_prev + 1.5 * self._period - time.monotonic()))
+            start = time.monotonic()
+            poses = _drain(vicon)
+            imu = None
+            if rx is not None:
+                imu = self._front.receive(rx.t, rx.msg)
+                self._last_raw = rx.msg
+            elif start - last_config > RESEND_CONFIG_AFTER_S and \
+                    self._front.health(start, 0.0, 0.0).data_age_s > RESEND_CONFIG_AFTER_S:
+                link.send(self._config_msg)  # the stream stopped: ask for it again
+                last_config = start
+            vh = vicon.health()
+            health = self._front.health(start, vh.time_since_pose_s, vh.rate_hz)
+            result = core.tick(start, imu, poses, self._front.status, health, self.stop_requests)
+            latency = math.nan
+            if result.due:
+                link.send(result.command)
+                self._stats.sent += 1
+                if rx is not None:
+                    latency = time.monotonic() - rx.t
+            if core.supervisor.commanding and not link.armed:
+                link.arm()
+            compute = time.monotonic() - start
+            self._account(start - t_prev, compute, latency, result)
+            self._record(recorder, start, imu, poses, result, compute, start - t_prev, latency)
+            telemetry.maybe_publish(start, partial(self._snapshot, result, link, vh))
+            if wd_interval is not None and start >= next_wd:
+                notifier.watchdog()
+                next_wd = start + wd_interval / 2
+            if self._progress is not None and start >= next_progress:
+                self._progress(self._progress_line(result, health.data_rate_hz, vh.rate_hz))
+                next_progress = start + 1.0
+            t_prev = start
+
+    def _account(self, interval: float, compute: float, latency: float,
+                 result: TickResult) -> None:
+        s = self._stats
+        s.ticks += 1
+        s.compute.append(compute)
+        s.jitter.append(interval - self._period)
+        if not math.isnan(latency):
+            s.latency.append(latency)
+        if result.state is State.TRACK and result.estimate is not None:
+            err = float(np.linalg.norm(result.reference.position - result.estimate.position))
+            s.track_sq += err * err
+            s.track_n += 1
+            s.track_max = max(s.track_max, err)
+
+    def _record(self, recorder: FlightRecorder, t: float, imu: ImuSample | None,
+                poses: list[Pose], result: TickResult, compute: float, interval: float,
+                latency: float) -> None:
+        if imu is not None:
+            self._last_imu = imu
+        raw, last = self._last_raw, self._last_imu
+        if raw is None or last is None or raw.gyro is None or raw.acc is None:
+            return  # nothing from the vehicle yet: nothing to record
+        cmd = result.command
+        sticks = result.sticks if result.sticks is not None else self._front.status.pilot
+        recorder.append(
+            t=t, imu=last, gyro_counts=(raw.gyro.x, raw.gyro.y, raw.gyro.z),
+            acc_counts=(raw.acc.x, raw.acc.y, raw.acc.z),
+            pose=poses[-1] if poses else None, estimate=result.estimate,
+            reference=result.reference, sticks=sticks, ctrl_mask=cmd.ctrl, sent=result.due,
+            state=int(result.state), compute_time=compute, jitter=interval - self._period,
+            latency=latency,
+        )
+
+    def _snapshot(self, result: TickResult, link: SerialLink, vicon_health: object
+                  ) -> dict[str, dict[str, object]]:
+        sticks = result.sticks if result.sticks is not None else self._front.status.pilot
+        stats = link.stats()
+        return {
+            "state": state_payload(state=int(result.state), state_name=result.state.name,
+                                   estimate=result.estimate, reference=result.reference,
+                                   sticks=sticks, ctrl_mask=result.command.ctrl,
+                                   sent=result.due),
+            "health": health_payload(
+                link={"rate_hz": stats.data_rate_hz, "rejected": dict(stats.rejections)},
+                vicon=vicon_health, estimator=self.core.ekf.health()
+                if self.core.init_report is not None else None,
+                loop={"ticks": self._stats.ticks, "commands": self._stats.sent}),
+        }
+
+    def _progress_line(self, result: TickResult, data_hz: float, vicon_hz: float) -> str:
+        err = "-"
+        if result.estimate is not None:
+            e = float(np.linalg.norm(result.reference.position - result.estimate.position))
+            err = f"{100 * e:5.1f} cm"
+        return (f"{result.state.name:<9} error {err}  DATA {data_hz:5.1f} Hz  "
+                f"Vicon {vicon_hz:5.1f} Hz  mask 0x{result.command.ctrl:X}")
+
+    def _summary(self) -> FlightSummary:
+        s, sup = self._stats, self.core.supervisor
+        return FlightSummary(
+            final_state=sup.state, success=sup.success, transitions=list(sup.transitions),
+            log_dir=self.log_dir,
+            track_rms_m=math.sqrt(s.track_sq / s.track_n) if s.track_n else math.nan,
+            track_max_m=s.track_max if s.track_n else math.nan,
+            compute_s=np.asarray(s.compute), jitter_s=np.asarray(s.jitter[1:]),
+            latency_s=np.asarray(s.latency), commands_sent=s.sent, ticks=s.ticks,
+        )
+
+
+def _drain(vicon: ViconClient) -> list[Pose]:
+    """Every pose the Vicon reader queued since the last tick (never blocks)."""
+    poses = []
+    while (pose := vicon.get(0.0)) is not None:
+        poses.append(pose)
+    return poses
