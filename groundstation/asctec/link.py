@@ -62,6 +62,16 @@ def _link_error(message: str, cause: BaseException) -> LinkError:
     return error
 
 
+def _open_port(url: str, baudrate: int, read_timeout: float, write_timeout: float) -> Any:
+    """Open ``url`` with pyserial (8N1, no flow control); LinkError if it fails."""
+    try:
+        return serial.serial_for_url(
+            url, baudrate=baudrate, timeout=read_timeout, write_timeout=write_timeout
+        )
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise LinkError(f"cannot open serial port {url!r}: {exc}") from exc
+
+
 class SerialLink:
     """Serial link to the X-3D: DATA in (queued, timestamped), any message out.
 
@@ -113,12 +123,7 @@ class SerialLink:
         self._stop = threading.Event()
         self._keepalive_stop = threading.Event()
         self._keepalive: threading.Thread | None = None
-        try:
-            self._port: Any = serial.serial_for_url(
-                url, baudrate=baudrate, timeout=self.READ_TIMEOUT, write_timeout=write_timeout
-            )
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise LinkError(f"cannot open serial port {url!r}: {exc}") from exc
+        self._port = _open_port(url, baudrate, self.READ_TIMEOUT, write_timeout)
         self._reader = threading.Thread(
             target=self._read_loop, name=f"x3d-reader {url}", daemon=True
         )
