@@ -147,6 +147,10 @@ class FlightDaemon:
         self._last_imu: ImuSample | None = None
         self._last_raw: DataMsg | None = None
         self.log_dir = ""
+        self.telemetry_endpoint: str | None = None
+        """The bound telemetry endpoint once :meth:`run` has started (``*`` ports resolved)."""
+        self.ready = threading.Event()
+        """Set once every resource is open and the loop is about to start."""
 
     @property
     def stop_requests(self) -> int:
@@ -171,9 +175,11 @@ class FlightDaemon:
             self.log_dir = str(recorder.directory)
             telemetry = TelemetryPublisher.from_config(cfg.telemetry)
             stack.callback(telemetry.close)
+            self.telemetry_endpoint = telemetry.endpoint
             stack.enter_context(_signals(self._signals))
             link.send(self._config_msg)
             notifier.ready("preflight")
+            self.ready.set()
             log.info("flight starting", port=cfg.serial.port, vicon_port=cfg.vicon.port,
                      log=self.log_dir, controller=cfg.controller.type)
             self._loop(link, vicon, recorder, telemetry, notifier)
