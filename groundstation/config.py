@@ -428,6 +428,7 @@ class SimFaultsConfig(_Model):
     stall_at_s: NonNegFloat | None = None  # DATA stream stalls at this simulated time
     stall_duration_s: NonNegFloat = 0.0
     burst_delay_s: NonNegFloat = 0.0  # hold DATA and deliver it in bursts of this length
+    delay_s: NonNegFloat = 0.0  # constant extra delivery delay of every DATA frame
 
 
 class SimViconConfig(_Model):
@@ -442,6 +443,9 @@ class SimViconConfig(_Model):
     outages: list[tuple[float, float]] = Field(default_factory=list)  # (start_s, duration_s)
     tilt_limit_deg: PositiveFloat = 60.0  # tracking lost beyond this tilt; markers occluded
     pad_to: int | None = Field(1024, ge=80)  # Tracker's data block size (spec)
+    volume_x: tuple[float, float] = (-1.5, 1.5)  # tracked volume, Table B.1 [m]
+    volume_y: tuple[float, float] = (-1.5, 1.5)  # Table B.1
+    volume_z: tuple[float, float] = (-2.0, 0.05)  # Table B.1: 0..2 m height, NED
 
 
 class SimConfig(_Model):
@@ -452,6 +456,8 @@ class SimConfig(_Model):
     rate_loop_tau_s: NonNegFloat = 0.064
     # first-order rate loop: 10-90 % rise 2.2 tau = 0.14 s (Fig. 3.8); 0 disables
     command_delay_s: NonNegFloat = 0.02  # transport delay of the command link (Ch. 3.3.1)
+    motor_tau_s: NonNegFloat = 0.02
+    # lift lag of motors and rotors; the thesis gives none, 20 ms is typical of the class
     battery_droop: float = Field(0.03, ge=0.0, lt=0.5)
     # lift loss fraction over battery_droop_time_s (Ch. 5.2 observed a growing offset)
     battery_droop_time_s: PositiveFloat = 300.0
@@ -464,6 +470,8 @@ class SimConfig(_Model):
     pilot_thrust: int = Field(0, ge=0, le=4096)
     # scripted pilot's thrust stick when it has the vehicle (0 = motors idle on the ground)
     serial_enable: bool = True  # the RC serial-enable switch
+    pilot_holds_thrust: bool = True
+    # a pilot handed the vehicle in the air holds the thrust applied at that moment
     rc_link: bool = True
     battery_mv: int = Field(11800, ge=0)  # reported in STATUS (3S LiPo, spec worked frame)
     truth_file: Path | None = None  # ground truth written here on exit

@@ -275,9 +275,8 @@ class LabParams:
     def from_config(cls, config: GroundStationConfig) -> LabParams:
         """Parameters from a validated configuration (``sim`` may be absent: defaults).
 
-        Fields without a configuration key keep their defaults: plant.thrust_tau,
-        faults.data_delay, the Vicon volume, imu.gyro_saturation/pressure_noise,
-        link.watchdog (the spec's 100 ms) and pilot.hold_thrust.
+        Fields without a configuration key keep their defaults:
+        imu.gyro_saturation/pressure_noise and link.watchdog (the spec's 100 ms).
         """
         from groundstation.config import SimConfig
 
@@ -290,9 +289,9 @@ class LabParams:
                             command_delay=sim.command_delay_s, battery_mv=sim.battery_mv),
             faults=FaultParams(corruption_rate=f.corruption_rate, drop_rate=f.drop_rate,
                                stall_at=f.stall_at_s, stall_duration=f.stall_duration_s,
-                               burst_period=f.burst_delay_s),
+                               burst_period=f.burst_delay_s, data_delay=f.delay_s),
             pilot=PilotParams(thrust=sim.pilot_thrust, serial_enable=sim.serial_enable,
-                              rc_link=sim.rc_link),
+                              rc_link=sim.rc_link, hold_thrust=sim.pilot_holds_thrust),
         )
 
 
@@ -301,7 +300,7 @@ def _plant_params(config: GroundStationConfig, sim: SimConfig) -> PlantParams:
     return PlantParams(
         mass=veh.mass_kg, g=veh.gravity, k_rate=_vec3(veh.k_rate),
         thrust_poly=tuple(veh.thrust_poly), inflow=veh.induced_inflow,
-        rate_tau=sim.rate_loop_tau_s, thrust_scale=sim.thrust_scale,
+        rate_tau=sim.rate_loop_tau_s, thrust_tau=sim.motor_tau_s, thrust_scale=sim.thrust_scale,
         battery_droop=sim.battery_droop, battery_droop_time=sim.battery_droop_time_s,
         initial_position=_vec3(sim.initial_position),
         initial_yaw=math.radians(sim.initial_yaw_deg),
@@ -328,6 +327,7 @@ def _vicon_params(config: GroundStationConfig, sim: SimConfig) -> ViconSimParams
         loss_encoding=sv.loss_encoding,
         outages=tuple((float(start), float(length)) for start, length in sv.outages),
         tilt_limit_deg=sv.tilt_limit_deg, object_name=vc.object_name, pad_to=sv.pad_to,
+        volume_x=sv.volume_x, volume_y=sv.volume_y, volume_z=sv.volume_z,
         world_to_ned=_mat3(vc.world_to_ned.as_matrix()),
         body_to_object=_mat3(vc.body_to_object.as_matrix()),
     )
