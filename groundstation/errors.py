@@ -15,6 +15,8 @@ Tree::
     ├── LinkError(OSError)                serial port could not be opened / read / written
     │   └── LinkTimeoutError(TimeoutError) no DATA within the expected time
     ├── ViconError(OSError)               UDP socket could not be bound or read
+    ├── TelemetryError(OSError)           telemetry socket could not be bound or connected
+    ├── RecorderError(OSError)            flight log could not be written or read
     ├── EstimatorError(ArithmeticError)   estimator diverged or lost numerical soundness
     ├── ControlError                      controller could not be built or evaluated
     │   └── TrajectoryError(ValueError)   a trajectory that cannot be flown or parsed
@@ -57,6 +59,14 @@ class LinkTimeoutError(LinkError, TimeoutError):
 
 class ViconError(GroundStationError, OSError):
     """The Vicon UDP socket could not be bound or read."""
+
+
+class TelemetryError(GroundStationError, OSError):
+    """The telemetry (pyzmq) socket could not be bound or connected, or is closed."""
+
+
+class RecorderError(GroundStationError, OSError):
+    """A flight log could not be created, written or read."""
 
 
 class EstimatorError(GroundStationError, ArithmeticError):

@@ -74,7 +74,7 @@ import numpy.typing as npt
 import structlog
 
 from groundstation import __version__
-from groundstation.errors import GroundStationError
+from groundstation.errors import RecorderError
 from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
 
 log = structlog.get_logger(__name__)
@@ -275,7 +275,7 @@ class FlightRecorder:
             ``{"supervisor_states": [s.name for s in State]}`` (JSON-serialisable;
             the recorder's own keys ``format``, ``schema_version``, ``version``,
             ``start_time``, ``start_monotonic``, ``units`` take precedence)
-        Raises GroundStationError if the directory or files cannot be written.
+        Raises RecorderError if the directory or files cannot be written.
         """
         start_wall = dt.datetime.now(dt.UTC)
         start_mono = time.monotonic()
@@ -294,7 +294,7 @@ class FlightRecorder:
             _write_json(directory / META_FILE, full)
             return cls(directory, full, flush_interval_s=flush_interval_s, capacity=capacity)
         except OSError as exc:
-            raise GroundStationError(f"cannot start a flight log in {log_dir}: {exc}") from exc
+            raise RecorderError(f"cannot start a flight log in {log_dir}: {exc}") from exc
 
     @property
     def rows(self) -> int:
@@ -454,7 +454,7 @@ def read_flight(path: str | Path) -> tuple[npt.NDArray[np.void], dict[str, Any],
     """Read a flight log: ``(rows as RECORD_DTYPE, meta dict, config YAML text)``.
 
     path : the flight directory or its flight.npy. Works on the log of a flight
-    still running or killed (rows up to the last flush). Raises GroundStationError
+    still running or killed (rows up to the last flush). Raises RecorderError
     if the files are missing, unreadable or of another schema version.
     """
     p = Path(path)
@@ -464,9 +464,9 @@ def read_flight(path: str | Path) -> tuple[npt.NDArray[np.void], dict[str, Any],
         meta = json.loads((directory / META_FILE).read_text(encoding="utf-8"))
         config = (directory / CONFIG_FILE).read_text(encoding="utf-8")
     except (OSError, ValueError) as exc:
-        raise GroundStationError(f"{directory}: not a readable flight log: {exc}") from exc
+        raise RecorderError(f"{directory}: not a readable flight log: {exc}") from exc
     if flat.dtype != FLAT_DTYPE:
-        raise GroundStationError(
+        raise RecorderError(
             f"{directory}: flight log schema {meta.get('schema_version')!r} is not "
             f"this version's ({SCHEMA_VERSION})"
         )
@@ -481,7 +481,7 @@ def export_csv(path: str | Path, out_csv: str | Path | TextIO) -> int:
     The header line names the columns (``t,imu_t,...,est_position_x,...``); floats
     are written with shortest round-trip precision, bools as 0/1, missing values
     as ``nan``. ``np.genfromtxt(out_csv, delimiter=",", names=True)`` reads it back.
-    Raises GroundStationError if the log cannot be read or the CSV written.
+    Raises RecorderError if the log cannot be read or the CSV written.
     """
     data, _, _ = read_flight(path)
     flat = data.view(FLAT_DTYPE)
@@ -490,5 +490,5 @@ def export_csv(path: str | Path, out_csv: str | Path | TextIO) -> int:
     try:
         np.savetxt(out_csv, flat, fmt=fmt, delimiter=",", header=",".join(names), comments="")
     except OSError as exc:
-        raise GroundStationError(f"cannot write {out_csv}: {exc}") from exc
+        raise RecorderError(f"cannot write {out_csv}: {exc}") from exc
     return len(flat)

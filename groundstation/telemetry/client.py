@@ -17,7 +17,7 @@ from typing import Any
 
 import zmq
 
-from groundstation.errors import GroundStationError
+from groundstation.errors import TelemetryError
 from groundstation.telemetry.schema import decode
 
 
@@ -28,7 +28,7 @@ class TelemetryClient:
     topics : topic prefixes to subscribe to (default: every topic)
     rcvhwm : messages queued before zmq drops the oldest arrivals
     context : a zmq.Context to share (not terminated by :meth:`close`)
-    Raises GroundStationError if the endpoint is invalid.
+    Raises TelemetryError if the endpoint is invalid.
     """
 
     def __init__(
@@ -49,15 +49,15 @@ class TelemetryClient:
         except zmq.ZMQError as exc:
             sock.close(linger=0)
             self._close_context()
-            raise GroundStationError(f"telemetry: cannot connect {endpoint!r}: {exc}") from exc
+            raise TelemetryError(f"telemetry: cannot connect {endpoint!r}: {exc}") from exc
         self._socket: zmq.Socket[Any] | None = sock
         self.endpoint = endpoint
 
     def receive(self, timeout: float | None = None) -> tuple[str, dict[str, Any]] | None:
         """The next ``(topic, payload)``, or None if none arrives within ``timeout`` [s]
-        (None waits forever). Raises GroundStationError if the client is closed."""
+        (None waits forever). Raises TelemetryError if the client is closed."""
         if self._socket is None:
-            raise GroundStationError("telemetry client is closed")
+            raise TelemetryError("telemetry client is closed")
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             wait_ms = None if deadline is None else max(0, math.ceil(

@@ -125,7 +125,7 @@ def run_monitor(
 ) -> int:
     """Show the live view of ``endpoint`` until ``duration`` seconds pass (None: until
     Ctrl-C); return the number of messages received. Ctrl-C ends it cleanly.
-    Raises GroundStationError if the endpoint is invalid."""
+    Raises TelemetryError if the endpoint is invalid."""
     stream = sys.stdout if out is None else out
     latest: dict[str, dict[str, Any]] = {}
     received, drawn = 0, 0

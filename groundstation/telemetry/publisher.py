@@ -22,7 +22,7 @@ import structlog
 import zmq
 
 from groundstation.config import TelemetryConfig
-from groundstation.errors import GroundStationError
+from groundstation.errors import TelemetryError
 from groundstation.telemetry.schema import SCHEMA_VERSION, TOPIC_HEALTH, encode
 
 log = structlog.get_logger(__name__)
@@ -42,7 +42,7 @@ class TelemetryPublisher:
         telemetry is worthless, memory is not)
     context : a zmq.Context to share (not terminated by :meth:`close`); by default
         the publisher owns one
-    Raises GroundStationError if the socket cannot be bound.
+    Raises TelemetryError if the socket cannot be bound.
     """
 
     def __init__(
@@ -80,7 +80,7 @@ class TelemetryPublisher:
         except zmq.ZMQError as exc:
             sock.close(linger=0)
             self._close_context()
-            raise GroundStationError(f"telemetry: cannot bind {endpoint!r}: {exc}") from exc
+            raise TelemetryError(f"telemetry: cannot bind {endpoint!r}: {exc}") from exc
         self._socket = sock
         self.endpoint = last.decode() if isinstance(last, bytes) else str(last)
 
