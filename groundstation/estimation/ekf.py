@@ -293,6 +293,9 @@ class Ekf:
         """Propagate to ``t1`` (input ``gyro1, acc1`` there), fusing ``poses`` (sorted,
         times in ``(t, t1]``) at their time stamps. Returns the result for ``new``."""
         result = None
+        if not poses:
+            self._propagate_to(t1, gyro1, acc1)
+            return None
         t0, g0, a0 = self._t, self._gyro.copy(), self._acc.copy()
         span = t1 - t0
         for item in poses:
@@ -313,14 +316,14 @@ class Ekf:
     def _propagate_to(self, t: float, gyro: FloatArray, acc: FloatArray) -> None:
         """Integrate state and covariance from the filter time to ``t`` (input linear)."""
         dt_total = t - self._t
-        if dt_total > 0.0:
-            n = max(1, math.ceil(dt_total / self.params.max_step - 1e-9))
+        if 0.0 < dt_total <= self.params.max_step:
+            self._step(dt_total, gyro, acc)
+        elif dt_total > 0.0:  # a long gap: sub-step, input still linear in time
+            n = math.ceil(dt_total / self.params.max_step)
             g0, a0 = self._gyro.copy(), self._acc.copy()
             for i in range(1, n + 1):
                 f = i / n
-                g1 = g0 + f * (gyro - g0) if n > 1 else gyro
-                a1 = a0 + f * (acc - a0) if n > 1 else acc
-                self._step(dt_total / n, g1, a1)
+                self._step(dt_total / n, g0 + f * (gyro - g0), a0 + f * (acc - a0))
         self._t = t
         self._gyro[:] = gyro
         self._acc[:] = acc
@@ -410,14 +413,16 @@ class Ekf:
             return nis, False
         K = sol[:, 1:].T  # (15, 6) = P H^T S^-1
         dx = K @ y
-        A = self._Phi  # scratch: A = I - K H
-        A[:] = self._I
-        A[:, 0:6] -= K
-        np.matmul(A, P, out=self._T)
-        np.matmul(self._T, A.T, out=P)
+        # Joseph form (I - K H) P (I - K H)^T + K R K^T, using H = [I_6 0]:
+        # T = (I - K H) P = P - K P[0:6, :];  T (I - K H)^T = T - T[:, 0:6] K^T
+        T = self._T
+        np.matmul(K, P[0:6, :], out=self._Phi)
+        np.subtract(P, self._Phi, out=T)
+        np.matmul(T[:, 0:6], sol[:, 1:], out=self._Phi)
+        np.subtract(T, self._Phi, out=P)
         P += K @ (self._r[:, None] * sol[:, 1:])  # K R K^T with R diagonal
-        np.add(P, P.T, out=self._T)
-        np.multiply(self._T, 0.5, out=P)
+        np.add(P, P.T, out=T)
+        np.multiply(T, 0.5, out=P)
         x[0:3] += dx[0:3]
         x[3:7] = _quat_mul_exp(x[3:7].tolist(), dx[3:6].tolist())
         x[7:16] += dx[6:15]
