@@ -45,6 +45,7 @@ from groundstation.loop.inputs import DataFrontEnd
 from groundstation.loop.recorder import FlightRecorder
 from groundstation.loop.sdnotify import SdNotifier
 from groundstation.loop.supervisor import State, Transition
+from groundstation.loop.timing import TimingHistogram
 from groundstation.telemetry.publisher import TelemetryPublisher
 from groundstation.telemetry.schema import health_payload, state_payload
 from groundstation.types import ImuSample, Pose
@@ -64,8 +65,8 @@ class FlightSummary:
     transitions : every state change with its reason
     log_dir : the flight log directory
     track_rms_m, track_max_m : estimate-vs-reference 3-D error while tracking [m]
-    compute_s, jitter_s, latency_s : per-tick timing samples [s]
-    commands_sent, ticks : counters
+    compute, jitter, latency : per-tick timing histograms [s] (jitter as |interval - period|)
+    commands_sent, ticks : counters; duration_s : wall time of the loop [s]
     """
 
     final_state: State
@@ -74,29 +75,26 @@ class FlightSummary:
     log_dir: str
     track_rms_m: float
     track_max_m: float
-    compute_s: np.ndarray
-    jitter_s: np.ndarray
-    latency_s: np.ndarray
+    compute: TimingHistogram
+    jitter: TimingHistogram
+    latency: TimingHistogram
     commands_sent: int
     ticks: int
+    duration_s: float
 
     def percentiles(self) -> dict[str, tuple[float, float]]:
         """p50 and p99 of compute time, |jitter| and latency [s]."""
-        out = {}
-        for name, values in (("compute", self.compute_s), ("jitter", np.abs(self.jitter_s)),
-                             ("latency", self.latency_s)):
-            if values.size:
-                out[name] = (float(np.percentile(values, 50)), float(np.percentile(values, 99)))
-            else:
-                out[name] = (math.nan, math.nan)
-        return out
+        return {name: (h.percentile(50.0), h.percentile(99.0)) for name, h in
+                (("compute", self.compute), ("jitter", self.jitter), ("latency", self.latency))}
 
 
 @dataclass
 class _Stats:
-    compute: list[float] = field(default_factory=list)
-    jitter: list[float] = field(default_factory=list)
-    latency: list[float] = field(default_factory=list)
+    compute: TimingHistogram = field(default_factory=TimingHistogram)
+    jitter: TimingHistogram = field(default_factory=TimingHistogram)
+    latency: TimingHistogram = field(default_factory=TimingHistogram)
+    t_start: float = 0.0
+    t_end: float = 0.0
     track_sq: float = 0.0
     track_max: float = 0.0
     track_n: int = 0
@@ -191,7 +189,7 @@ class FlightDaemon:
         core = self.core
         wd_interval = notifier.watchdog_interval()
         next_wd = next_progress = last_config = -math.inf
-        t_prev = time.monotonic()
+        t_prev = self._stats.t_start = time.monotonic()
         while not core.supervisor.terminal:
             rx = link.get(timeout=max(0.0, t_prev + 1.5 * self._period - time.monotonic()))
             start = time.monotonic()
@@ -226,15 +224,16 @@ class FlightDaemon:
                 self._progress(self._progress_line(result, health.data_rate_hz, vh.rate_hz))
                 next_progress = start + 1.0
             t_prev = start
+        self._stats.t_end = time.monotonic()
 
     def _account(self, interval: float, compute: float, latency: float,
                  result: TickResult) -> None:
         s = self._stats
         s.ticks += 1
-        s.compute.append(compute)
-        s.jitter.append(interval - self._period)
-        if not math.isnan(latency):
-            s.latency.append(latency)
+        s.compute.add(compute)
+        if s.ticks > 1:  # the first interval is the wait for the first DATA frame
+            s.jitter.add(abs(interval - self._period))
+        s.latency.add(latency)  # NaN (no command this tick) is ignored
         if result.state is State.TRACK and result.estimate is not None:
             err = float(np.linalg.norm(result.reference.position - result.estimate.position))
             s.track_sq += err * err
@@ -291,8 +290,8 @@ class FlightDaemon:
             log_dir=self.log_dir,
             track_rms_m=math.sqrt(s.track_sq / s.track_n) if s.track_n else math.nan,
             track_max_m=s.track_max if s.track_n else math.nan,
-            compute_s=np.asarray(s.compute), jitter_s=np.asarray(s.jitter[1:]),
-            latency_s=np.asarray(s.latency), commands_sent=s.sent, ticks=s.ticks,
+            compute=s.compute, jitter=s.jitter, latency=s.latency, commands_sent=s.sent,
+            ticks=s.ticks, duration_s=s.t_end - s.t_start,
         )
 
 
