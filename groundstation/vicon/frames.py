@@ -40,6 +40,7 @@ import numpy as np
 import numpy.typing as npt
 
 from groundstation.errors import ConfigError
+from groundstation.model.quaternion import dcm_from_quat, normalize, quat_from_dcm
 from groundstation.types import FloatArray
 
 Vector3 = tuple[float, float, float]
@@ -119,46 +120,6 @@ def matrix_to_euler_xyz(m: FloatArray) -> Vector3:
     return math.atan2(m[2, 1], m[1, 1]), ry, 0.0
 
 
-def matrix_to_quaternion(m: FloatArray) -> FloatArray:
-    """Unit quaternion ``[q0, q1, q2, q3]`` (scalar first, q0 >= 0) with R(q) = m.
-
-    m : (3, 3) rotation matrix. Shepperd's method (largest diagonal term first),
-    so it is accurate for every attitude.
-    """
-    m00, m01, m02 = m[0, 0], m[0, 1], m[0, 2]
-    m10, m11, m12 = m[1, 0], m[1, 1], m[1, 2]
-    m20, m21, m22 = m[2, 0], m[2, 1], m[2, 2]
-    trace = m00 + m11 + m22
-    if trace > 0.0:
-        s = 2.0 * math.sqrt(1.0 + trace)
-        q = (0.25 * s, (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s)
-    elif m00 > m11 and m00 > m22:
-        s = 2.0 * math.sqrt(1.0 + m00 - m11 - m22)
-        q = ((m21 - m12) / s, 0.25 * s, (m01 + m10) / s, (m02 + m20) / s)
-    elif m11 > m22:
-        s = 2.0 * math.sqrt(1.0 + m11 - m00 - m22)
-        q = ((m02 - m20) / s, (m01 + m10) / s, 0.25 * s, (m12 + m21) / s)
-    else:
-        s = 2.0 * math.sqrt(1.0 + m22 - m00 - m11)
-        q = ((m10 - m01) / s, (m02 + m20) / s, (m12 + m21) / s, 0.25 * s)
-    scale = math.copysign(1.0 / math.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2), q[0])
-    return np.array(q) * scale
-
-
-def quaternion_to_matrix(q: VectorLike) -> FloatArray:
-    """Rotation matrix R(q) (3, 3) of a scalar-first Hamilton quaternion (normalised here)."""
-    q0, q1, q2, q3 = (float(v) for v in q)
-    n = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
-    s = 2.0 / n
-    return np.array(
-        [
-            [1.0 - s * (q2 * q2 + q3 * q3), s * (q1 * q2 - q0 * q3), s * (q1 * q3 + q0 * q2)],
-            [s * (q1 * q2 + q0 * q3), 1.0 - s * (q1 * q1 + q3 * q3), s * (q2 * q3 - q0 * q1)],
-            [s * (q1 * q3 - q0 * q2), s * (q2 * q3 + q0 * q1), 1.0 - s * (q1 * q1 + q2 * q2)],
-        ]
-    )
-
-
 def vicon_to_ned(
     translation_mm: VectorLike,
     rotation_xyz: VectorLike,
@@ -173,7 +134,7 @@ def vicon_to_ned(
     """
     position = world_to_ned @ np.array(translation_mm, dtype=np.float64) * 1e-3
     r_ov = euler_xyz_to_matrix(rotation_xyz[0], rotation_xyz[1], rotation_xyz[2])
-    return position, matrix_to_quaternion(world_to_ned @ r_ov @ body_to_object)
+    return position, quat_from_dcm(world_to_ned @ r_ov @ body_to_object)
 
 
 def ned_to_vicon(
@@ -187,7 +148,8 @@ def ned_to_vicon(
     position : (3,) NED [m]; quaternion : (4,) scalar first, R(q) = eCb.
     """
     t = world_to_ned.T @ np.asarray(position, dtype=np.float64) * 1e3
-    r_ov = world_to_ned.T @ quaternion_to_matrix(quaternion) @ body_to_object.T
+    e_c_b = dcm_from_quat(normalize(np.asarray(quaternion, dtype=float)))
+    r_ov = world_to_ned.T @ e_c_b @ body_to_object.T
     return (float(t[0]), float(t[1]), float(t[2])), matrix_to_euler_xyz(r_ov)
 
 
