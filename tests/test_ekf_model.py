@@ -168,3 +168,18 @@ def test_process_noise_equals_g_qc_gt() -> None:
     Qc = np.diag(np.r_[np.array(p.gyro_var) * p.imu_period, np.array(p.acc_var) * p.imu_period,
                        [p.gyro_bias_walk] * 3, [p.acc_bias_walk] * 3])
     np.testing.assert_allclose(ekf._P, G @ Qc @ G.T * dt, rtol=1e-12, atol=1e-20)
+
+
+def test_health_trace_equals_the_16_state_covariance_trace() -> None:
+    """The closed-form trace in health() equals the sum of estimate().covariance_diag."""
+    from groundstation.estimation.ekf import Ekf
+    from groundstation.types import Pose
+
+    rng = np.random.default_rng(7)
+    ekf = Ekf()
+    q = rng.normal(size=4)
+    ekf.initialise(Pose(0.0, np.zeros(3), q / np.linalg.norm(q)))
+    a = rng.normal(size=(15, 15))
+    ekf._P[:] = a @ a.T  # a full, random covariance (white-box: P is private)
+    expected = float(np.sum(ekf.estimate().covariance_diag))
+    assert ekf.health().covariance_trace == pytest.approx(expected, rel=1e-12)

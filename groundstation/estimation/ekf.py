@@ -224,7 +224,7 @@ class Ekf:
 
     def health(self) -> EkfHealth:
         """Counters and consistency figures (see :class:`EkfHealth`)."""
-        trace = float(np.sum(self.estimate().covariance_diag)) if self._initialised else _NAN
+        trace = self._trace16() if self._initialised else _NAN
         return EkfHealth(
             t=self._t,
             initialised=self._initialised,
@@ -243,6 +243,13 @@ class Ekf:
             invalid_imu=self.invalid_imu,
             stale_imu=self.stale_imu,
         )
+
+    def _trace16(self) -> float:
+        """Trace of the covariance in the 16-state layout, without building it: the
+        quaternion block is ``Xi P_tt Xi^T / 4`` and ``Xi^T Xi = |q|^2 I = I``, so its trace
+        is ``trace(P_tt) / 4``."""
+        P = self._P
+        return float(np.trace(P)) - 0.75 * float(P[3, 3] + P[4, 4] + P[5, 5])
 
     @property
     def state(self) -> FloatArray:

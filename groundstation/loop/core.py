@@ -163,10 +163,13 @@ class FlightCore:
                 self.init_report = self.ekf.initialise(self._last_pose, list(self._imu_buffer))
                 self._t_init = self._last_pose.t
             return None
-        if imu is not None:
-            self.ekf.predict(imu)
+        # Poses first: one newer than the filter time is deferred and fused inside the
+        # next prediction step at its own time stamp; fusing it after the prediction
+        # would make the EKF restore a checkpoint and re-propagate (same result, ~2x cost).
         for pose in poses:
             self.ekf.update(pose)
+        if imu is not None:
+            self.ekf.predict(imu)
         return self.ekf.estimate()
 
     def _observe(self, t: float, vehicle: VehicleStatus, health: InputHealth,
