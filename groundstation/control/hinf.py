@@ -1,0 +1,187 @@
+"""H-infinity controller (thesis Ch. 10): synthesis entry point, gain file, controller.
+
+:func:`synthesise_hinf` solves the LMI of :mod:`.hinf_design` (needs the
+optional ``hinf`` extra, cvxpy) and returns a :class:`HinfGain`; ``save`` and
+:func:`load_hinf_gain` store it as a small ``.npz`` so the loop (and the tests)
+fly a synthesised gain without cvxpy. :class:`HinfController` applies
+``u = F_s x_s + F_r r`` with ``r`` the reference outputs ``[x, y, z, q3]`` (the
+output of the reference weight, ``C_r x_r = x_r``, eq. 10.5) and, for a gain
+designed with the rate-loop lag, the measured body rates in ``x_s``. The noise
+weight's states are unknown to the controller and taken as zero.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from groundstation.control.base import fill_reduced_state, reference_outputs
+from groundstation.control.hinf_design import (
+    HinfWeights,
+    plant_model,
+    solve_lmi,
+    standard_problem,
+)
+from groundstation.control.lqr import H_OUTPUTS
+from groundstation.control.sticks import CommandLimits, StickParams
+from groundstation.errors import ControlError
+from groundstation.model import QuadrotorParams
+from groundstation.types import ControlOutput, FloatArray, Reference, StateEstimate
+
+DATA_DIR = Path(__file__).with_name("data")
+"""Where the committed gains live (``hinf_thesis.npz``, ``hinf_rate_loop.npz``)."""
+
+
+@dataclass(frozen=True, slots=True)
+class HinfGain:
+    """A synthesised state-feedback gain ``u = F_s x_s + F_r r`` (+ ``F_n x_n``, unused).
+
+    F_s : (4, n_s) on the reduced state (n_s = 9) or with body rates (n_s = 12);
+    F_r : (4, 4) on the reference outputs [x, y, z, q3]; F_n : (4, 4) on the
+    noise-weight states; gamma : the H-infinity bound the LMI was solved for;
+    include_rate_loop, rate_tau [s]: the design model; weights : as a dict;
+    objective : "feasibility" or "min-gain". Input order [omega (3), F_z].
+    """
+
+    F_s: FloatArray
+    F_r: FloatArray
+    F_n: FloatArray
+    gamma: float
+    include_rate_loop: bool
+    rate_tau: float
+    weights: dict[str, object]
+    objective: str
+
+    def save(self, path: str | Path) -> None:
+        """Write the gain and its design metadata to an ``.npz`` file."""
+        meta = {"gamma": self.gamma, "include_rate_loop": self.include_rate_loop,
+                "rate_tau": self.rate_tau, "weights": self.weights, "objective": self.objective}
+        with Path(path).open("wb") as fh:
+            np.savez(fh, F_s=self.F_s, F_r=self.F_r, F_n=self.F_n,
+                     meta=np.array(json.dumps(meta, sort_keys=True)))
+
+
+def load_hinf_gain(path: str | Path) -> HinfGain:
+    """Read a gain written by :meth:`HinfGain.save`; ControlError if unreadable or malformed."""
+    try:
+        with np.load(Path(path), allow_pickle=False) as data:
+            F_s, F_r, F_n = (np.array(data[k], dtype=float) for k in ("F_s", "F_r", "F_n"))
+            meta = json.loads(str(data["meta"]))
+    except (OSError, KeyError, ValueError) as exc:
+        raise ControlError(f"{path}: not an H-infinity gain file: {exc}") from exc
+    n_s = 12 if meta.get("include_rate_loop") else 9
+    if F_s.shape != (4, n_s) or F_r.shape != (4, 4) or F_n.shape != (4, 4):
+        raise ControlError(f"{path}: gain shapes {F_s.shape}, {F_r.shape}, {F_n.shape} do not "
+                           f"match a {n_s}-state design")
+    return HinfGain(F_s, F_r, F_n, float(meta["gamma"]), bool(meta["include_rate_loop"]),
+                    float(meta["rate_tau"]), dict(meta["weights"]), str(meta["objective"]))
+
+
+def synthesise_hinf(
+    params: QuadrotorParams | None = None,
+    *,
+    include_rate_loop: bool,
+    weights: HinfWeights | None = None,
+    gamma: float = 1.0,
+    objective: Literal["feasibility", "min-gain"] = "feasibility",
+    rate_tau: float | None = None,
+    solver: str = "CLARABEL",
+) -> HinfGain:
+    """Synthesise the Ch. 10 state-feedback gain (continuous-time LMI, eq. 10.12-10.17).
+
+    params : the vehicle; include_rate_loop : design on the model with the
+    first-order rate-loop lag (time constant ``rate_tau``, default
+    ``params.rate_tau``) instead of the thesis's model; weights : the standard
+    problem's weights; gamma : the bound (the thesis's LMI is normalised to 1:
+    ``R_1 = I - D11ᵀD11``); objective : "feasibility" returns the solver's
+    feasible point, as the thesis's LMI solver did, "min-gain" the point
+    with the smallest ``|W|`` under ``Y >= I`` (a bound on ``|F|``).
+    Needs cvxpy (the ``hinf`` extra); ControlError if infeasible.
+    """
+    p = params if params is not None else QuadrotorParams()
+    w = weights if weights is not None else HinfWeights()
+    tau = p.rate_tau if rate_tau is None else rate_tau
+    A_s, B_s = plant_model(p, include_rate_loop, tau)
+    sp = standard_problem(A_s, B_s, w)
+    F = solve_lmi(sp, gamma=gamma, objective=objective, solver=solver)
+    n_s = sp.n_s
+    return HinfGain(
+        F_s=F[:, :n_s], F_r=F[:, n_s:n_s + 4], F_n=F[:, n_s + 4:], gamma=gamma,
+        include_rate_loop=include_rate_loop, rate_tau=tau if include_rate_loop else 0.0,
+        weights=asdict(w), objective=objective,
+    )
+
+
+class HinfController:
+    """Fly a stored H-infinity gain: ``u = F_s x_s + F_r r``, saturated.
+
+    gain : a :class:`HinfGain` (e.g. from :func:`load_hinf_gain`); params : the
+    vehicle (for the default saturation limits); limits : output saturation.
+    reference_gain : "dc" (default) replaces the synthesised ``F_r`` by
+    ``-F_s T`` (T puts r on the x, y, z, q3 states), the static prefilter that
+    makes hover at the reference an equilibrium: the standard problem models the
+    reference as the output of the low-pass ``W_r`` that decays to zero, so the
+    synthesised ``F_r`` only follows a fraction of a constant reference (about
+    0.66 for the thesis-model gain). "synthesised" keeps ``F_r``. Stability
+    depends on ``F_s`` only.
+    """
+
+    def __init__(self, gain: HinfGain, *, params: QuadrotorParams | None = None,
+                 limits: CommandLimits | None = None,
+                 reference_gain: Literal["dc", "synthesised"] = "dc") -> None:
+        p = params if params is not None else QuadrotorParams()
+        self.gain = gain
+        self._n_s = gain.F_s.shape[1]
+        if self._n_s not in (9, 12):
+            raise ControlError(f"F_s must have 9 or 12 columns, found {self._n_s}")
+        if reference_gain not in ("dc", "synthesised"):
+            raise ControlError(f"reference_gain must be 'dc' or 'synthesised', "
+                               f"found {reference_gain!r}")
+        F_r = -gain.F_s[:, H_OUTPUTS] if reference_gain == "dc" else gain.F_r
+        self._K = np.hstack([gain.F_s, F_r])
+        self._z = np.zeros(self._n_s + 4)
+        self._u = np.zeros(4)
+        lim = limits or CommandLimits.from_stick_params(StickParams.from_quadrotor(p))
+        self._u_lo = np.array([*lim.omega_min, lim.f_z_min])
+        self._u_hi = np.array([*lim.omega_max, lim.f_z_max])
+
+    def reset(self) -> None:
+        """Stateless apart from scratch buffers: nothing to forget."""
+
+    def step(self, t: float, estimate: StateEstimate, reference: Reference) -> ControlOutput:
+        """``u = F_s x_s + F_r r`` with the rates fed back for a lag-model gain."""
+        z = self._z
+        fill_reduced_state(estimate, z)
+        n = self._n_s
+        if n == 12:
+            z[9:12] = estimate.omega
+        reference_outputs(reference, z[n:])
+        u = np.dot(self._K, z, out=self._u)
+        np.clip(u, self._u_lo, self._u_hi, out=u)
+        return ControlOutput(omega=u[0:3].copy(), f_z=float(u[3]))
+
+
+DEFAULT_GAIN_FILES = {False: "hinf_thesis.npz", True: "hinf_rate_loop.npz"}
+"""Committed gains: designed on the thesis's model / on the model with the rate-loop lag."""
+
+
+def default_gain_path(include_rate_loop: bool) -> Path:
+    """Path of the committed gain for the thesis's model (False) or the lagged one (True)."""
+    return DATA_DIR / DEFAULT_GAIN_FILES[include_rate_loop]
+
+
+def write_default_gains(directory: str | Path = DATA_DIR) -> list[Path]:
+    """Synthesise both committed gains with the default weights (gamma = 1, feasibility).
+
+    This is how ``data/hinf_thesis.npz`` and ``data/hinf_rate_loop.npz`` were made.
+    """
+    out = []
+    for lag, name in DEFAULT_GAIN_FILES.items():
+        path = Path(directory) / name
+        synthesise_hinf(include_rate_loop=lag).save(path)
+        out.append(path)
+    return out

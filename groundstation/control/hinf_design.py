@@ -1,0 +1,211 @@
+"""H-infinity state-feedback synthesis (thesis Ch. 10): the standard problem and its LMI.
+
+Standard problem (eq. 10.1-10.10), state ``x = [x_s, x_r, x_n]``:
+
+* ``x_s`` the plant: the reduced hover model (9 states) or, with
+  ``include_rate_loop``, the model with the first-order rate-loop lag (12);
+* ``x_r`` the reference weight ``W_r = k_r / (s + a_r)`` per output
+  [x, y, z, q3] (eq. 10.10): the reference the vehicle must follow is the
+  output of a low-pass filter driven by ``w_r``;
+* ``x_n`` the sensor-noise weight ``W_n = k_n (s + b_n) / (s + a_n)``
+  (high-pass, eq. 10.7; the thesis's state-space form eq. 10.9 has a typo:
+  the input matrix is ``k_n (b_n - a_n)``).
+
+Performance ``z = [C_r x_r - C_s' x_s ; eps u]`` (eq. 10.5), so ``D12 = [0; eps I]``
+has full column rank. With state feedback ``u = F x`` the LMI of eq. 10.12-10.16
+(``D11 = 0``, so ``R_1 = I``), with the bound ``gamma`` made explicit::
+
+    [[A Y + Y Aᵀ + B2 W + Wᵀ B2ᵀ,  B1,      Y C1ᵀ + Wᵀ D12ᵀ],
+     [B1ᵀ,                         -gamma I, 0             ],
+     [C1 Y + D12 W,                0,       -gamma I       ]]  < 0,   Y > 0
+
+gives ``||T_zw||_inf < gamma`` and ``F = W Y⁻¹`` (eq. 10.17). The measurement
+channel (``C2``, ``D21``, the noise weight) does not enter a state-feedback
+LMI; ``W_n`` is kept for fidelity to the standard problem (its states are
+uncontrollable and stable, their gain unused).
+
+Why continuous time: the thesis synthesises in continuous time and its
+finding (the gain that stabilises the model but not the vehicle) is about the
+missing rate-loop dynamics, not about sampling. The loop runs at 100 Hz,
+more than 30 times the closed-loop bandwidth, so the continuous design is
+checked afterwards on the exact discretisation at the loop period with the
+command delay (:func:`discrete_spectral_radius`), which is what decides
+stability in the loop.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from groundstation.control.lqr import H_OUTPUTS
+from groundstation.errors import ControlError
+from groundstation.model import QuadrotorParams, hover_model_rate_lag, hover_model_reduced
+from groundstation.types import FloatArray
+
+
+@dataclass(frozen=True, slots=True)
+class HinfWeights:
+    """Weights of the standard problem (thesis Ch. 10.1).
+
+    eps : input weight in ``D12`` (eq. 10.5); reference_pole a_r [rad/s] and
+    reference_gain k_r of ``W_r`` (default k_r = a_r: unit DC gain);
+    noise_gain k_n, noise_zero b_n, noise_pole a_n [rad/s] of ``W_n``;
+    output_scale : (4,) weights on the [x, y, z, q3] errors in ``z``.
+    """
+
+    eps: float = 0.1
+    reference_pole: float = 1.0
+    reference_gain: float | None = None
+    noise_gain: float = 0.01
+    noise_zero: float = 1.0
+    noise_pole: float = 100.0
+    output_scale: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+
+
+@dataclass(frozen=True, slots=True)
+class StandardProblem:
+    """``A, B1, B2, C1, D11, D12, C2, D21`` of eq. 10.1 and the state partition sizes."""
+
+    A: FloatArray
+    B1: FloatArray
+    B2: FloatArray
+    C1: FloatArray
+    D11: FloatArray
+    D12: FloatArray
+    C2: FloatArray
+    D21: FloatArray
+    n_s: int
+    n_r: int
+    n_n: int
+
+
+def plant_model(params: QuadrotorParams, include_rate_loop: bool,
+                rate_tau: float | None = None) -> tuple[FloatArray, FloatArray]:
+    """Continuous ``(A_s, B_s)``: reduced hover model, or with the rate-loop lag."""
+    model = (hover_model_rate_lag(params, rate_tau) if include_rate_loop
+             else hover_model_reduced(params))
+    return model.A, model.B
+
+
+def standard_problem(A_s: FloatArray, B_s: FloatArray, weights: HinfWeights) -> StandardProblem:
+    """Assemble eq. 10.1-10.10 around the plant ``(A_s, B_s)`` (outputs x, y, z, q3)."""
+    n_s, m = B_s.shape
+    p = 4
+    w = weights
+    a_r = w.reference_pole
+    k_r = a_r if w.reference_gain is None else w.reference_gain
+    C_s = np.zeros((p, n_s))
+    C_s[np.arange(p), H_OUTPUTS] = 1.0
+    n = n_s + 2 * p
+    A = scipy.linalg.block_diag(A_s, -a_r * np.eye(p), -w.noise_pole * np.eye(p))
+    B1 = np.zeros((n, 2 * p))
+    B1[n_s:n_s + p, :p] = k_r * np.eye(p)
+    B1[n_s + p:, p:] = w.noise_gain * (w.noise_zero - w.noise_pole) * np.eye(p)
+    B2 = np.vstack([B_s, np.zeros((2 * p, m))])
+    scale = np.diag(w.output_scale)
+    C1 = np.zeros((p + m, n))
+    C1[:p, :n_s] = -scale @ C_s
+    C1[:p, n_s:n_s + p] = scale
+    D12 = np.vstack([np.zeros((p, m)), w.eps * np.eye(m)])
+    C2 = np.hstack([np.eye(n_s), np.zeros((n_s, p)), np.zeros((n_s, p))])
+    C2[np.ix_(H_OUTPUTS, range(n_s + p, n))] = np.eye(p)  # noise on the measured outputs
+    D21 = np.zeros((n_s, 2 * p))
+    D21[np.ix_(H_OUTPUTS, range(p, 2 * p))] = w.noise_gain * np.eye(p)
+    return StandardProblem(A, B1, B2, C1, np.zeros((p + m, 2 * p)), D12, C2, D21, n_s, p, p)
+
+
+def solve_lmi(sp: StandardProblem, *, gamma: float | None = 1.0, objective: str = "feasibility",
+              margin: float = 1e-7, solver: str = "CLARABEL") -> FloatArray:
+    """Solve the LMI (eq. 10.12-10.17) with cvxpy; returns ``F = W Y⁻¹`` (m, n).
+
+    gamma : the bound; ``None`` minimises it (the optimum is degenerate: Y
+    becomes singular and the gain unbounded, use it to find ``gamma_min`` only).
+    objective : "feasibility" (any feasible point, as an LMI feasibility solver
+    returns), or "min-gain": minimise ``|W|_F`` with ``Y >= I``, which bounds
+    ``|F| <= |W|`` (the thesis aimed at "as low a feedback matrix as possible").
+    Needs the optional ``hinf`` extra (cvxpy); ControlError without it or when
+    the LMI is infeasible.
+    """
+    try:  # optional extra, imported lazily; typed Any so mypy agrees with and without it
+        cp: Any = importlib.import_module("cvxpy")
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ControlError("H-infinity synthesis needs cvxpy: pip install '.[hinf]'") from exc
+    if objective not in ("feasibility", "min-gain"):
+        raise ControlError(f"objective must be 'feasibility' or 'min-gain', found {objective!r}")
+    n, m = sp.B2.shape
+    nw, nz = sp.B1.shape[1], sp.C1.shape[0]
+    Y = cp.Variable((n, n), symmetric=True)
+    W = cp.Variable((m, n))
+    g = cp.Variable() if gamma is None else gamma
+    F11 = sp.A @ Y + Y @ sp.A.T + sp.B2 @ W + W.T @ sp.B2.T
+    F13 = Y @ sp.C1.T + W.T @ sp.D12.T
+    lmi = cp.bmat([
+        [F11, sp.B1, F13],
+        [sp.B1.T, -g * np.eye(nw), sp.D11.T],
+        [F13.T, sp.D11, -g * np.eye(nz)],
+    ])
+    y_min = 1.0 if objective == "min-gain" and gamma is not None else margin
+    cons = [0.5 * (lmi + lmi.T) << -margin * np.eye(n + nw + nz), Y >> y_min * np.eye(n)]
+    if gamma is None:
+        goal = cp.Minimize(g)
+    elif objective == "min-gain":
+        goal = cp.Minimize(cp.norm(W, "fro"))
+    else:
+        goal = cp.Minimize(0)
+    problem = cp.Problem(goal, cons)
+    try:
+        problem.solve(solver=solver)
+    except cp.error.SolverError:
+        if solver == "SCS":
+            raise ControlError("H-infinity LMI: the solver failed") from None
+        problem.solve(solver="SCS")  # first-order fallback when the interior point stalls
+    if problem.status not in ("optimal", "optimal_inaccurate") or Y.value is None:
+        raise ControlError(f"H-infinity LMI (gamma={gamma}) not solved: {problem.status}")
+    F = np.linalg.solve(Y.value.T, W.value.T).T  # F = W Y^-1: solve, do not invert
+    return np.asarray(F, dtype=float)
+
+
+def continuous_closed_loop(A_s: FloatArray, B_s: FloatArray, F_s: FloatArray) -> FloatArray:
+    """Eigenvalues of ``A_s + B_s F_s`` (plant part; reference zero)."""
+    return np.asarray(np.linalg.eigvals(A_s + B_s @ F_s), dtype=complex)
+
+
+def discrete_spectral_radius(A_s: FloatArray, B_s: FloatArray, F_s: FloatArray, dt: float,
+                             delay_s: float = 0.0) -> float:
+    """Spectral radius of the sampled loop ``u(k) = F_s x(k)`` on the ZOH plant.
+
+    A_s (n, n), B_s (n, m): the plant the gain is tried on (may have more
+    states than F_s has columns: extra states, such as the rate-loop lag, are
+    not fed back). ``delay_s`` [s] of transport delay is rounded to whole
+    samples and modelled as a shift register of inputs. < 1 means stable.
+    """
+    n, m = B_s.shape
+    d = round(delay_s / dt)
+    M = np.zeros((n + m, n + m))
+    M[:n, :n], M[:n, n:] = A_s, B_s
+    E = scipy.linalg.expm(M * dt)
+    Phi, Gamma = E[:n, :n], E[:n, n:]
+    K = np.zeros((m, n))
+    K[:, : F_s.shape[1]] = F_s
+    size = n + d * m
+    T = np.zeros((size, size))
+    T[:n, :n] = Phi
+    if d == 0:
+        T[:n, :n] += Gamma @ K
+    else:
+        T[:n, n + (d - 1) * m:] = Gamma  # the oldest input acts now
+        T[n:n + m, :n] = K  # the newest input enters the register
+        for j in range(1, d):
+            T[n + j * m:n + (j + 1) * m, n + (j - 1) * m:n + j * m] = np.eye(m)
+    return float(np.max(np.abs(np.linalg.eigvals(T))))
+
+
+def hinf_bandwidth_hz(poles: FloatArray) -> float:
+    """Slowest closed-loop pole as a frequency [Hz] (|Re| / 2 pi), a bandwidth indicator."""
+    return float(np.min(np.abs(np.real(poles))) / (2.0 * math.pi))
