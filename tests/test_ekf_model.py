@@ -183,3 +183,17 @@ def test_health_trace_equals_the_16_state_covariance_trace() -> None:
     ekf._P[:] = a @ a.T  # a full, random covariance (white-box: P is private)
     expected = float(np.sum(ekf.estimate().covariance_diag))
     assert ekf.health().covariance_trace == pytest.approx(expected, rel=1e-12)
+
+
+def test_diverged_flags_a_large_or_non_finite_covariance() -> None:
+    from groundstation.estimation.ekf import Ekf
+    from groundstation.types import Pose
+
+    ekf = Ekf(EkfParams(divergence_trace=1.0))
+    assert not ekf.diverged  # not initialised yet
+    ekf.initialise(Pose(0.0, np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])))
+    assert not ekf.diverged and ekf.diverged == ekf.health().diverged
+    ekf._P[7, 7] = 2.0  # velocity variance alone over the limit
+    assert ekf.diverged and ekf.health().diverged
+    ekf._P[7, 7] = math.nan
+    assert ekf.diverged

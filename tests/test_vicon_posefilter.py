@@ -332,3 +332,16 @@ def test_from_lab_config() -> None:
     pose = f.process(encode_datagram(1, [obj(name=cfg.object_name)]), 1.0)
     assert pose is not None
     np.testing.assert_allclose(pose.position, [0.1, -0.2, -1.0], atol=1e-15)
+
+
+def test_rate_and_age_is_the_health_subset() -> None:
+    """The per-tick accessor agrees with the full health snapshot."""
+    filt = PoseFilter("X3D")
+    for k in range(30):
+        pose = ObjectPose("X3D", (1.0 + k, 2.0, 1000.0), (0.01 * k, 0.02, 0.03))
+        filt.process(encode_datagram(k + 1, [pose]), 0.01 * k)
+    now = 0.4
+    rate, age = filt.rate_and_age(now)
+    health = filt.health(now)
+    assert (rate, age) == (health.rate_hz, health.time_since_pose_s)
+    assert rate == pytest.approx(30.0) and age == pytest.approx(0.11)

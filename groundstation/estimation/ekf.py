@@ -244,6 +244,15 @@ class Ekf:
             stale_imu=self.stale_imu,
         )
 
+    @property
+    def diverged(self) -> bool:
+        """True if the covariance trace exceeds ``divergence_trace`` or is not finite
+        (the per-tick subset of :meth:`health`; False before :meth:`initialise`)."""
+        if not self._initialised:
+            return False
+        trace = self._trace16()
+        return not trace <= self.params.divergence_trace
+
     def _trace16(self) -> float:
         """Trace of the covariance in the 16-state layout, without building it: the
         quaternion block is ``Xi P_tt Xi^T / 4`` and ``Xi^T Xi = |q|^2 I = I``, so its trace

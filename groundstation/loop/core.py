@@ -175,8 +175,7 @@ class FlightCore:
     def _observe(self, t: float, vehicle: VehicleStatus, health: InputHealth,
                  stop_requests: int) -> Observation:
         est = self._estimate
-        ekf_health = self.ekf.health() if est is not None else None
-        diverged = ekf_health is not None and ekf_health.diverged
+        diverged = est is not None and self.ekf.diverged
         settled = (self._t_init is not None and est is not None
                    and est.t - self._t_init >= self._settle_s)
         gravity_ok = bool(self.init_report is not None and self.init_report.gravity_ok)

@@ -12,9 +12,16 @@ stalled stream still reaches the supervisor's link-loss failsafe.
 
 Timing per tick (recorded, summarised in :class:`FlightSummary`):
 
-* compute: wall time from the tick's start to the end of its work;
-* jitter: the tick's interval minus the DATA period (0 on a perfect schedule);
-* latency: DATA frame received (reader thread's time stamp) to COMMAND written.
+* compute: from the tick's start (DATA in hand) to its COMMAND written;
+* jitter: how late the tick started against its schedule. The loop is scheduled
+  by DATA arrival, so this is the tick's start minus the DATA frame's receive
+  time (the reader thread's stamp), or minus the deadline for a stalled stream;
+* latency: DATA frame received to COMMAND written (jitter + compute);
+* DATA interval: the spacing of DATA frames as received, a property of the link
+  and the vehicle, reported beside the loop's own figures.
+
+While flying, the interpreter's thread switch interval is shortened to 0.5 ms
+(default 5 ms) so a reader thread holding the GIL cannot delay a tick by more.
 
 Stopping: the first SIGINT/SIGTERM asks the supervisor to land (or hand back,
 see ``safety.on_signal``), a second one hands back at once. Whatever the way
@@ -26,6 +33,7 @@ from __future__ import annotations
 
 import math
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -65,7 +73,8 @@ class FlightSummary:
     transitions : every state change with its reason
     log_dir : the flight log directory
     track_rms_m, track_max_m : estimate-vs-reference 3-D error while tracking [m]
-    compute, jitter, latency : per-tick timing histograms [s] (jitter as |interval - period|)
+    compute, jitter, latency : per-tick timing histograms [s] (see the module docstring)
+    data_interval : spacing of the received DATA frames [s]
     commands_sent, ticks : counters; duration_s : wall time of the loop [s]
     """
 
@@ -78,6 +87,7 @@ class FlightSummary:
     compute: TimingHistogram
     jitter: TimingHistogram
     latency: TimingHistogram
+    data_interval: TimingHistogram
     commands_sent: int
     ticks: int
     duration_s: float
@@ -93,6 +103,7 @@ class _Stats:
     compute: TimingHistogram = field(default_factory=TimingHistogram)
     jitter: TimingHistogram = field(default_factory=TimingHistogram)
     latency: TimingHistogram = field(default_factory=TimingHistogram)
+    data_interval: TimingHistogram = field(default_factory=TimingHistogram)
     t_start: float = 0.0
     t_end: float = 0.0
     track_sq: float = 0.0
@@ -175,6 +186,7 @@ class FlightDaemon:
             stack.callback(telemetry.close)
             self.telemetry_endpoint = telemetry.endpoint
             stack.enter_context(_signals(self._signals))
+            stack.enter_context(_switch_interval(0.0005))
             link.send(self._config_msg)
             notifier.ready("preflight")
             self.ready.set()
@@ -190,20 +202,27 @@ class FlightDaemon:
         wd_interval = notifier.watchdog_interval()
         next_wd = next_progress = last_config = -math.inf
         t_prev = self._stats.t_start = time.monotonic()
+        t_rx_prev = math.nan
         while not core.supervisor.terminal:
-            rx = link.get(timeout=max(0.0, t_prev + 1.5 * self._period - time.monotonic()))
+            deadline = t_prev + 1.5 * self._period
+            rx = link.get(timeout=max(0.0, deadline - time.monotonic()))
             start = time.monotonic()
             poses = _drain(vicon)
             imu = None
             if rx is not None:
                 imu = self._front.receive(rx.t, rx.msg)
                 self._last_raw = rx.msg
-            elif start - last_config > RESEND_CONFIG_AFTER_S and \
-                    self._front.health(start, 0.0, 0.0).data_age_s > RESEND_CONFIG_AFTER_S:
-                link.send(self._config_msg)  # the stream stopped: ask for it again
-                last_config = start
-            vh = vicon.health()
-            health = self._front.health(start, vh.time_since_pose_s, vh.rate_hz)
+                scheduled = rx.t
+                self._stats.data_interval.add(rx.t - t_rx_prev)
+                t_rx_prev = rx.t
+            else:
+                scheduled = deadline
+                if start - last_config > RESEND_CONFIG_AFTER_S and \
+                        self._front.data_age(start) > RESEND_CONFIG_AFTER_S:
+                    link.send(self._config_msg)  # the stream stopped: ask for it again
+                    last_config = start
+            vicon_rate, vicon_age = vicon.rate_and_age()
+            health = self._front.health(start, vicon_age, vicon_rate)
             result = core.tick(start, imu, poses, self._front.status, health, self.stop_requests)
             latency = math.nan
             if result.due:
@@ -214,25 +233,24 @@ class FlightDaemon:
             if core.supervisor.commanding and not link.armed:
                 link.arm()
             compute = time.monotonic() - start
-            self._account(start - t_prev, compute, latency, result)
-            self._record(recorder, start, imu, poses, result, compute, start - t_prev, latency)
-            telemetry.maybe_publish(start, partial(self._snapshot, result, link, vh))
+            self._account(start - scheduled, compute, latency, result)
+            self._record(recorder, start, imu, poses, result, compute, start - scheduled, latency)
+            telemetry.maybe_publish(start, partial(self._snapshot, result, link, vicon))
             if wd_interval is not None and start >= next_wd:
                 notifier.watchdog()
                 next_wd = start + wd_interval / 2
             if self._progress is not None and start >= next_progress:
-                self._progress(self._progress_line(result, health.data_rate_hz, vh.rate_hz))
+                self._progress(self._progress_line(result, health.data_rate_hz, vicon_rate))
                 next_progress = start + 1.0
             t_prev = start
         self._stats.t_end = time.monotonic()
 
-    def _account(self, interval: float, compute: float, latency: float,
+    def _account(self, jitter: float, compute: float, latency: float,
                  result: TickResult) -> None:
         s = self._stats
         s.ticks += 1
         s.compute.add(compute)
-        if s.ticks > 1:  # the first interval is the wait for the first DATA frame
-            s.jitter.add(abs(interval - self._period))
+        s.jitter.add(jitter)
         s.latency.add(latency)  # NaN (no command this tick) is ignored
         if result.state is State.TRACK and result.estimate is not None:
             err = float(np.linalg.norm(result.reference.position - result.estimate.position))
@@ -241,7 +259,7 @@ class FlightDaemon:
             s.track_max = max(s.track_max, err)
 
     def _record(self, recorder: FlightRecorder, t: float, imu: ImuSample | None,
-                poses: list[Pose], result: TickResult, compute: float, interval: float,
+                poses: list[Pose], result: TickResult, compute: float, jitter: float,
                 latency: float) -> None:
         if imu is not None:
             self._last_imu = imu
@@ -255,11 +273,11 @@ class FlightDaemon:
             acc_counts=(raw.acc.x, raw.acc.y, raw.acc.z),
             pose=poses[-1] if poses else None, estimate=result.estimate,
             reference=result.reference, sticks=sticks, ctrl_mask=cmd.ctrl, sent=result.due,
-            state=int(result.state), compute_time=compute, jitter=interval - self._period,
+            state=int(result.state), compute_time=compute, jitter=jitter,
             latency=latency,
         )
 
-    def _snapshot(self, result: TickResult, link: SerialLink, vicon_health: object
+    def _snapshot(self, result: TickResult, link: SerialLink, vicon: ViconClient
                   ) -> dict[str, dict[str, object]]:
         sticks = result.sticks if result.sticks is not None else self._front.status.pilot
         stats = link.stats()
@@ -270,7 +288,7 @@ class FlightDaemon:
                                    sent=result.due),
             "health": health_payload(
                 link={"rate_hz": stats.data_rate_hz, "rejected": dict(stats.rejections)},
-                vicon=vicon_health, estimator=self.core.ekf.health()
+                vicon=vicon.health(), estimator=self.core.ekf.health()
                 if self.core.init_report is not None else None,
                 loop={"ticks": self._stats.ticks, "commands": self._stats.sent}),
         }
@@ -290,9 +308,21 @@ class FlightDaemon:
             log_dir=self.log_dir,
             track_rms_m=math.sqrt(s.track_sq / s.track_n) if s.track_n else math.nan,
             track_max_m=s.track_max if s.track_n else math.nan,
-            compute=s.compute, jitter=s.jitter, latency=s.latency, commands_sent=s.sent,
+            compute=s.compute, jitter=s.jitter, latency=s.latency,
+            data_interval=s.data_interval, commands_sent=s.sent,
             ticks=s.ticks, duration_s=s.t_end - s.t_start,
         )
+
+
+@contextmanager
+def _switch_interval(seconds: float) -> Iterator[None]:
+    """Shorten the GIL switch interval for the block (restored afterwards)."""
+    previous = sys.getswitchinterval()
+    sys.setswitchinterval(seconds)
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(previous)
 
 
 def _drain(vicon: ViconClient) -> list[Pose]:

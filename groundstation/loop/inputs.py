@@ -101,6 +101,10 @@ class DataFrontEnd:
         self._acc[:] = (a.x, a.y, a.z)
         return self._scaling.scale(t, self._gyro, self._acc, msg.counter)
 
+    def data_age(self, now: float) -> float:
+        """Seconds since the last DATA frame (inf before the first)."""
+        return now - self._t_last
+
     def health(self, now: float, vicon_age_s: float, vicon_rate_hz: float) -> InputHealth:
         """Link and Vicon health at ``now``."""
         return InputHealth(data_age_s=now - self._t_last, data_rate_hz=self._rate.rate(now),

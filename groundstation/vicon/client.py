@@ -214,6 +214,16 @@ class ViconClient:
             self._check()
             return self._latest
 
+    def rate_and_age(self) -> tuple[float, float]:
+        """``(pose rate [Hz], time since the last accepted pose [s])`` now.
+
+        The cheap per-tick subset of :meth:`health` for the flight loop; it also drives
+        the rate-band warning. Raises ViconError if the reader failed.
+        """
+        with self._cond:
+            self._check()
+            return self.filter.rate_and_age(self._clock())
+
     def health(self) -> ViconHealth:
         """Snapshot of rate and counters now; also drives the rate-band warning."""
         with self._cond:

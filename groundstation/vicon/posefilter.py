@@ -198,6 +198,13 @@ class PoseFilter:
         self.rate.check(t_receive)
         return pose
 
+    def rate_and_age(self, now: float) -> tuple[float, float]:
+        """``(pose rate [Hz], time since the last accepted pose [s])`` at ``now``.
+
+        The cheap per-tick subset of :meth:`health`; it also drives the rate-band warning.
+        """
+        return self.rate.check(now), self.rate.time_since_pose(now)
+
     def health(self, now: float) -> ViconHealth:
         """Snapshot of rates and counters at monotonic time ``now`` [s].
 
