@@ -53,19 +53,30 @@ class NullController:
 
 
 def fill_reduced_state(estimate: StateEstimate, out: FloatArray) -> FloatArray:
-    """Write the reduced hover state ``[P, q1, q2, q3, v_body]`` (9,) of ``estimate`` into ``out``.
+    """Write the reduced hover state ``[P, q1, q2, q3, v]`` (9,) of ``estimate`` into ``out``.
 
     The quaternion sign is chosen with ``q0 >= 0`` so that the small-angle
     components ``q1..q3`` describe the attitude near hover (``q`` and ``-q`` are
-    the same attitude). ``out`` must be a float array of length >= 9; returns it.
+    the same attitude). The velocity is rotated to earth axes, ``v = eCb bv``:
+    the linear model's ``P_dot = v`` (eq. 4.8) then holds exactly, not only at
+    hover (a tilted vehicle flying level would otherwise appear to climb or
+    sink by ``sin(tilt) |v|``); at hover it equals ``bv``, the thesis's state.
+    ``out`` must be a float array of length >= 9; returns it.
     """
-    q = estimate.quaternion
-    sign = 1.0 if q[0] >= 0.0 else -1.0
+    q0, q1, q2, q3 = estimate.quaternion
+    sign = 1.0 if q0 >= 0.0 else -1.0
     out[0:3] = estimate.position
-    out[3] = sign * q[1]
-    out[4] = sign * q[2]
-    out[5] = sign * q[3]
-    out[6:9] = estimate.velocity_body
+    out[3] = sign * q1
+    out[4] = sign * q2
+    out[5] = sign * q3
+    vx, vy, vz = estimate.velocity_body
+    # eCb @ v (eq. 2.20 read as body -> earth, see groundstation.model.quaternion)
+    out[6] = ((q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) * vx + 2 * (q1 * q2 - q0 * q3) * vy
+              + 2 * (q1 * q3 + q0 * q2) * vz)
+    out[7] = (2 * (q1 * q2 + q0 * q3) * vx + (q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3) * vy
+              + 2 * (q2 * q3 - q0 * q1) * vz)
+    out[8] = (2 * (q1 * q3 - q0 * q2) * vx + 2 * (q2 * q3 + q0 * q1) * vy
+              + (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) * vz)
     return out
 
 

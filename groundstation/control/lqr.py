@@ -81,6 +81,9 @@ class LqrController:
         set-point step, not motion, and is not fed forward
     rate_loop_tau : if given [s], design on the model with the first-order
         rate-loop lag and feed back the measured body rates
+    tilt_compensation : divide the vertical force by the tilt cosine, so a
+        tilted vehicle keeps its height (the linear model drops this term;
+        False flies the thesis's purely linear law)
     limits : output saturation; default from ``params`` (stick ranges)
     """
 
@@ -99,6 +102,7 @@ class LqrController:
         velocity_filter: float = 0.5,
         max_reference_speed: float = 5.0,
         rate_loop_tau: float | None = None,
+        tilt_compensation: bool = True,
         limits: CommandLimits | None = None,
     ) -> None:
         self.params = params if params is not None else QuadrotorParams()
@@ -121,6 +125,8 @@ class LqrController:
         self._observer = (None if disturbance_tau is None
                           else DisturbanceObserver(Phi, Gamma, dt, disturbance_tau))
         self._half_inv_g = 0.5 / self.params.g
+        self._tilt_comp = tilt_compensation
+        self._weight = self.params.mass * self.params.g
         self._int_idx = np.array(integrated, dtype=int)  # integrated outputs (of x, y, z, q3)
         self._int_rows = np.take(H_OUTPUTS, self._int_idx)  # their rows in x_s
         lim = limits or CommandLimits.from_stick_params(StickParams.from_quadrotor(self.params))
@@ -199,9 +205,12 @@ class LqrController:
             xi = self._xi
             xi += self.dt * err
             np.clip(xi, -self._integral_limit, self._integral_limit, out=xi)
+        f_z = float(u[3])
         if obs is not None:
-            obs.commit(u)
-        return ControlOutput(omega=u[0:3].copy(), f_z=float(u[3]))
+            obs.commit(u)  # the linear model's input: the compensation below is not in it
+        if self._tilt_comp:
+            f_z = _tilt_compensated(f_z, estimate.quaternion, self._weight)
+        return ControlOutput(omega=u[0:3].copy(), f_z=f_z)
 
     def _update_reference_state(self, r: np.ndarray, reference: Reference) -> None:
         """Fill x_r: ``r`` (constant position) or ``[r; r - d]`` (constant velocity)."""
@@ -222,3 +231,14 @@ class LqrController:
             d[0:3] = self.dt * reference.velocity
         xr[4:8] = r
         xr[4:8] -= d
+
+
+def _tilt_compensated(f_lin: float, q: np.ndarray, weight: float) -> float:
+    """F_z that gives the vertical acceleration ``f_lin / m`` at the attitude ``q``.
+
+    Earth-z: ``m z'' = c F_z + m g (1 - c)`` with ``c = cos(tilt) = q0²-q1²-q2²+q3²``
+    (element (3, 3) of eCb); solved for F_z, with ``c`` floored at 0.5 (60 deg).
+    """
+    c = float(q[0] * q[0] - q[1] * q[1] - q[2] * q[2] + q[3] * q[3])
+    c = max(c, 0.5)
+    return (f_lin - weight * (1.0 - c)) / c

@@ -80,7 +80,7 @@ def yz_rectangle(
 def load_waypoints(path: str | Path, *, smoothing_s: float = 0.0) -> PiecewiseLinear:
     """Read a CSV of ``t, x, y, z[, yaw]`` rows (s, NED m, rad) into an open path.
 
-    A first line that is not numeric is a header; blank lines and lines
+    A first content line that is not numeric is a header; blank lines and lines
     starting with ``#`` are skipped. Times are taken relative to the first
     row and must increase strictly; the path holds the last point at the end.
     Raises TrajectoryError naming the line of any problem.
@@ -91,14 +91,16 @@ def load_waypoints(path: str | Path, *, smoothing_s: float = 0.0) -> PiecewiseLi
     except OSError as exc:
         raise TrajectoryError(f"{path}: cannot read waypoints: {exc.strerror}") from exc
     rows: list[list[float]] = []
+    first = True
     for lineno, row in enumerate(csv.reader(text.splitlines()), start=1):
         if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
             continue
+        header, first = first, False
         try:
             values = [float(cell) for cell in row]
         except ValueError:
-            if not rows and lineno == 1:
-                continue  # header
+            if header:
+                continue
             raise TrajectoryError(f"{path}:{lineno}: not a number in {row!r}") from None
         if len(values) not in (4, 5) or not all(math.isfinite(v) for v in values):
             raise TrajectoryError(
