@@ -137,6 +137,24 @@ def export(
 
 
 @app.command()
+def replay(
+    log: Annotated[Path, typer.Argument(help="Flight-log directory.")],
+    config: Annotated[Path | None, typer.Option(
+        "--config", "-c", help="Replay with this configuration instead of the flight's.")] = None,
+) -> None:
+    """Re-run the estimator and controller on a recorded flight; report the differences."""
+    from groundstation.loop.replay import replay_flight
+
+    cfg = load(config) if config is not None else None
+    try:
+        report = replay_flight(str(log), cfg)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 1) from exc
+    for line in report.lines():
+        typer.echo(line)
+
+
+@app.command()
 def monitor(
     endpoint: Annotated[str, typer.Option(help="Telemetry endpoint to subscribe to.")] =
         "tcp://127.0.0.1:5556",

@@ -130,7 +130,7 @@ class FlightCore:
     def tick(self, t: float, imu: ImuSample | None, poses: Sequence[Pose],
              vehicle: VehicleStatus, health: InputHealth, stop_requests: int = 0) -> TickResult:
         """Advance the flight by one tick at monotonic time ``t`` [s]."""
-        self._estimate = self._estimate_step(imu, poses)
+        self._estimate = self.estimate_step(imu, poses)
         old = self.supervisor.state
         state = self.supervisor.update(self._observe(t, vehicle, health, stop_requests))
         position = self._position()
@@ -153,7 +153,8 @@ class FlightCore:
         return TickResult(command, due, state, reference, self._estimate, sticks)
 
     # ------------------------------------------------------------------ steps
-    def _estimate_step(self, imu: ImuSample | None, poses: Sequence[Pose]) -> StateEstimate | None:
+    def estimate_step(self, imu: ImuSample | None, poses: Sequence[Pose]) -> StateEstimate | None:
+        """The estimator part of a tick (initialise, fuse poses, predict); public for replay."""
         if poses:
             self._last_pose = poses[-1]
         if self.init_report is None:

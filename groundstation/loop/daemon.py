@@ -46,17 +46,18 @@ import numpy as np
 import structlog
 
 from groundstation.asctec.link import SerialLink
-from groundstation.asctec.messages import ConfigMsg, DataMsg
+from groundstation.asctec.messages import ConfigMsg
 from groundstation.config import GroundStationConfig, dump_config
 from groundstation.loop.core import FlightCore, TickResult
 from groundstation.loop.inputs import DataFrontEnd
 from groundstation.loop.recorder import FlightRecorder
 from groundstation.loop.sdnotify import SdNotifier
 from groundstation.loop.supervisor import State, Transition
+from groundstation.loop.ticklog import TickLogger
 from groundstation.loop.timing import TimingHistogram
 from groundstation.telemetry.publisher import TelemetryPublisher
 from groundstation.telemetry.schema import health_payload, state_payload
-from groundstation.types import ImuSample, Pose
+from groundstation.types import Pose
 from groundstation.vicon.client import ViconClient
 
 log = structlog.get_logger(__name__)
@@ -153,8 +154,6 @@ class FlightDaemon:
         self._period = config.serial.data_period_ms / 1000.0
         self._config_msg = ConfigMsg(config.serial.sensor_mask, config.serial.data_period_ms)
         self._stats = _Stats()
-        self._last_imu: ImuSample | None = None
-        self._last_raw: DataMsg | None = None
         self.log_dir = ""
         self.telemetry_endpoint: str | None = None
         """The bound telemetry endpoint once :meth:`run` has started (``*`` ports resolved)."""
@@ -199,6 +198,7 @@ class FlightDaemon:
     def _loop(self, link: SerialLink, vicon: ViconClient, recorder: FlightRecorder,
               telemetry: TelemetryPublisher, notifier: SdNotifier) -> None:
         core = self.core
+        ticklog = TickLogger(recorder)
         wd_interval = notifier.watchdog_interval()
         next_wd = next_progress = last_config = -math.inf
         t_prev = self._stats.t_start = time.monotonic()
@@ -211,7 +211,6 @@ class FlightDaemon:
             imu = None
             if rx is not None:
                 imu = self._front.receive(rx.t, rx.msg)
-                self._last_raw = rx.msg
                 scheduled = rx.t
                 self._stats.data_interval.add(rx.t - t_rx_prev)
                 t_rx_prev = rx.t
@@ -234,7 +233,9 @@ class FlightDaemon:
                 link.arm()
             compute = time.monotonic() - start
             self._account(start - scheduled, compute, latency, result)
-            self._record(recorder, start, imu, poses, result, compute, start - scheduled, latency)
+            ticklog.record(start, rx.msg if rx is not None else None, imu, poses, result,
+                           self._front.status.pilot, compute=compute,
+                           jitter=start - scheduled, latency=latency)
             telemetry.maybe_publish(start, partial(self._snapshot, result, link, vicon))
             if wd_interval is not None and start >= next_wd:
                 notifier.watchdog()
@@ -257,25 +258,6 @@ class FlightDaemon:
             s.track_sq += err * err
             s.track_n += 1
             s.track_max = max(s.track_max, err)
-
-    def _record(self, recorder: FlightRecorder, t: float, imu: ImuSample | None,
-                poses: list[Pose], result: TickResult, compute: float, jitter: float,
-                latency: float) -> None:
-        if imu is not None:
-            self._last_imu = imu
-        raw, last = self._last_raw, self._last_imu
-        if raw is None or last is None or raw.gyro is None or raw.acc is None:
-            return  # nothing from the vehicle yet: nothing to record
-        cmd = result.command
-        sticks = result.sticks if result.sticks is not None else self._front.status.pilot
-        recorder.append(
-            t=t, imu=last, gyro_counts=(raw.gyro.x, raw.gyro.y, raw.gyro.z),
-            acc_counts=(raw.acc.x, raw.acc.y, raw.acc.z),
-            pose=poses[-1] if poses else None, estimate=result.estimate,
-            reference=result.reference, sticks=sticks, ctrl_mask=cmd.ctrl, sent=result.due,
-            state=int(result.state), compute_time=compute, jitter=jitter,
-            latency=latency,
-        )
 
     def _snapshot(self, result: TickResult, link: SerialLink, vicon: ViconClient
                   ) -> dict[str, dict[str, object]]:

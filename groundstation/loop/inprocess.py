@@ -13,6 +13,7 @@ Used by the tests, the evaluation suite (``gs eval --fast``) and ``gs replay``.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -25,7 +26,9 @@ from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
 from groundstation.loop.core import FlightCore, TickResult
 from groundstation.loop.inputs import DataFrontEnd
+from groundstation.loop.recorder import FlightRecorder
 from groundstation.loop.supervisor import State, Transition
+from groundstation.loop.ticklog import TickLogger
 from groundstation.types import FloatArray, Pose
 from groundstation.vicon.posefilter import PoseFilter
 from sim_device.lab import VirtualLab
@@ -88,7 +91,8 @@ class InProcessFlight:
 
     def __init__(self, config: GroundStationConfig, *, lab: VirtualLab | None = None,
                  controller: Controller | None = None, trajectory: Trajectory | None = None,
-                 duration_s: float | None = None) -> None:
+                 duration_s: float | None = None,
+                 recorder: FlightRecorder | None = None) -> None:
         self.config = config
         self.lab = lab if lab is not None else VirtualLab(config)
         self.core = FlightCore(config, controller=controller, trajectory=trajectory,
@@ -100,7 +104,12 @@ class InProcessFlight:
         self._period = config.serial.data_period_ms / 1000.0
         self.stop_requests = 0
         self.trace = FlightTrace()
+        self.compute_times: list[float] = []
+        """Wall time of each FlightCore.tick [s]: the code's back-to-back cost."""
         self._last: TickResult | None = None
+        self._ticklog = TickLogger(recorder) if recorder is not None else None
+        """With a recorder the flight writes the same log as the daemon (times are the
+        lab's simulated seconds; timing columns hold the core's compute time)."""
         self.lab.write(encode_frame(ConfigMsg(config.serial.sensor_mask,
                                               config.serial.data_period_ms), self._profile))
 
@@ -128,11 +137,17 @@ class InProcessFlight:
         imu = self._front.receive(t, msg) if msg is not None else None
         rate = self._poses.rate
         health = self._front.health(t, rate.time_since_pose(t), rate.rate(t))
+        start = time.perf_counter()
         result = self.core.tick(t, imu, poses, self._front.status, health, self.stop_requests)
+        compute = time.perf_counter() - start
+        self.compute_times.append(compute)
         if result.due:
             self.lab.write(encode_frame(result.command, self._profile))
         self._last = result
         self._record(t, result)
+        if self._ticklog is not None:
+            self._ticklog.record(t, msg, imu, list(poses), result, self._front.status.pilot,
+                                 compute=compute, jitter=0.0, latency=compute)
 
     def _record(self, t: float, r: TickResult) -> None:
         truth = self.lab.truth
@@ -179,8 +194,9 @@ class InProcessFlight:
 def fly_in_process(config: GroundStationConfig, *, lab: VirtualLab | None = None,
                    controller: Controller | None = None, trajectory: Trajectory | None = None,
                    duration_s: float | None = None, max_time_s: float = 300.0,
-                   events: Sequence[tuple[float, Event]] = ()) -> FlightResult:
+                   events: Sequence[tuple[float, Event]] = (),
+                   recorder: FlightRecorder | None = None) -> FlightResult:
     """Fly one whole flight in-process; see :class:`InProcessFlight`."""
     flight = InProcessFlight(config, lab=lab, controller=controller, trajectory=trajectory,
-                             duration_s=duration_s)
+                             duration_s=duration_s, recorder=recorder)
     return flight.run(max_time_s=max_time_s, events=events)

@@ -1,0 +1,45 @@
+"""One flight-log row per tick, shared by the real-time daemon and the in-process runner.
+
+Both loops log identically, so ``gs replay`` and ``gs report`` read a simulated
+flight exactly like a real one.
+"""
+
+from __future__ import annotations
+
+from groundstation.asctec.messages import DataMsg
+from groundstation.loop.core import TickResult
+from groundstation.loop.recorder import FlightRecorder
+from groundstation.types import ImuSample, Pose, Sticks
+
+
+class TickLogger:
+    """Writes each tick to a :class:`FlightRecorder`, carrying the last IMU sample over
+    ticks without one (a stalled stream keeps its last sample and counter, so a replay
+    sees a repeat, not new information). Nothing is written before the first DATA frame.
+    """
+
+    def __init__(self, recorder: FlightRecorder) -> None:
+        self.recorder = recorder
+        self._raw: DataMsg | None = None
+        self._imu: ImuSample | None = None
+
+    def record(self, t: float, raw: DataMsg | None, imu: ImuSample | None,
+               poses: list[Pose], result: TickResult, pilot: Sticks, *, compute: float,
+               jitter: float, latency: float) -> None:
+        """Append the tick at monotonic time ``t`` [s] (see the recorder's field list)."""
+        if raw is not None and raw.gyro is not None and raw.acc is not None:
+            self._raw = raw
+        if imu is not None:
+            self._imu = imu
+        raw, last = self._raw, self._imu
+        if raw is None or last is None or raw.gyro is None or raw.acc is None:
+            return
+        sticks = result.sticks if result.sticks is not None else pilot
+        self.recorder.append(
+            t=t, imu=last, gyro_counts=(raw.gyro.x, raw.gyro.y, raw.gyro.z),
+            acc_counts=(raw.acc.x, raw.acc.y, raw.acc.z),
+            pose=poses[-1] if poses else None, estimate=result.estimate,
+            reference=result.reference, sticks=sticks, ctrl_mask=result.command.ctrl,
+            sent=result.due, state=int(result.state), compute_time=compute, jitter=jitter,
+            latency=latency,
+        )
