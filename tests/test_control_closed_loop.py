@@ -141,3 +141,28 @@ def test_without_the_observer_the_thrust_error_is_the_closed_form_offset() -> No
     k_z = -ctrl.gains.K_s[3, 2]
     expected = 0.1 * 0.6 * 9.82 / (0.9 * k_z)
     assert np.mean(r.position[-300:, 2]) + 1.0 == pytest.approx(expected, rel=0.02)
+
+
+def test_integral_action_also_removes_the_thrust_error() -> None:
+    # the clamp must let K_i x_i reach the 0.65 N the 10 % error needs: |x_i| <= 2 m s
+    ctrl = LqrController(q_integral=(0.5, 0.5, 2.0, 0.0), disturbance_tau=None,
+                         integral_limit=2.0)
+    r = simulate(ctrl, make_trajectory("hover"), 25.0, plant=SimPlant(thrust_scale=0.9))
+    assert abs(np.mean(r.position[-300:, 2]) + 1.0) < 0.003
+    # with the default clamp (0.5 m s) it saturates: anti-windup holds it at the limit
+    held = LqrController(q_integral=(0.5, 0.5, 2.0, 0.0), disturbance_tau=None)
+    r = simulate(held, make_trajectory("hover"), 25.0, plant=SimPlant(thrust_scale=0.9))
+    assert np.mean(r.position[-300:, 2]) + 1.0 > 0.02
+
+
+def test_velocity_from_reference_samples_as_the_thesis_did() -> None:
+    # eq. 9.22-9.26 with the previous sample filtered: the feed-forward survives,
+    # at the price of the filter's delay alpha / (1 - alpha) samples (1 sample = 0.01 s)
+    sq = make_trajectory("square")
+    r = simulate(LqrController(velocity_source="samples", velocity_filter=0.5), sq, 40.0)
+    rms, lag = _second_lap(r)
+    assert abs(lag) < 0.05 and rms < 0.045
+    # a set-point step is not mistaken for a 50 m/s velocity (no feed-forward kick)
+    step = simulate(LqrController(velocity_source="samples"), make_trajectory("step-x"), 4.0)
+    assert not step.saturated.any()
+    assert np.max(step.position[:, 0]) < 0.5 * 1.1

@@ -8,6 +8,7 @@ import pytest
 
 from groundstation.control import FigureEight, FlightLimits, check_feasibility, make_trajectory
 from groundstation.errors import TrajectoryError
+from groundstation.model import QuadrotorParams, ThrustMap
 
 
 def test_thesis_trajectories_are_feasible() -> None:
@@ -66,3 +67,13 @@ def test_large_step_and_fast_climb_are_refused() -> None:
         check_feasibility(climb, FlightLimits(max_speed_m_s=10, max_tilt_rad=1.5,
                                               max_rate_rad_s=100, max_velocity_jump_m_s=10,
                                               lift_max_n=6.5))
+
+
+def test_limits_from_the_vehicle_model() -> None:
+    lim = FlightLimits.from_params(QuadrotorParams(), max_tilt_deg=25.0)
+    # eq. 3.7 at stick 0 gives -0.903 N (the least lift); the most at its monotonic end
+    assert lim.lift_min_n == pytest.approx(0.903)
+    assert lim.lift_max_n == pytest.approx(-ThrustMap().force(ThrustMap().u_max))
+    assert lim.max_rate_rad_s == pytest.approx(2047 * 1.1e-3)  # ~2.25 rad/s, Ch. 3.3.1
+    assert lim.max_tilt_rad == pytest.approx(math.radians(25.0))
+    assert check_feasibility(make_trajectory("square"), lim).feasible

@@ -24,6 +24,7 @@ import numpy as np
 
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import TrajectoryError
+from groundstation.model import QuadrotorParams, ThrustMap
 from groundstation.types import FloatArray
 
 
@@ -51,6 +52,21 @@ class FlightLimits:
     max_speed_m_s: float = 1.5
     max_position_jump_m: float = 1.0
     max_velocity_jump_m_s: float = 0.5
+
+    @classmethod
+    def from_params(cls, params: QuadrotorParams, *, max_tilt_deg: float = 20.0,
+                    max_speed_m_s: float = 1.5, max_position_jump_m: float = 1.0,
+                    max_velocity_jump_m_s: float = 0.5) -> FlightLimits:
+        """Limits of the vehicle model: lift range of the eq. 3.7 map over its monotonic
+        stick range, rate limits ``|K| * 2047`` (eq. 3.22), mass, g and I_i."""
+        f_most, f_least = ThrustMap(params.thrust_poly).force_range
+        k = [abs(v) * 2047 for v in params.k_rate]
+        return cls(mass_kg=params.mass, gravity=params.g, induced_inflow=params.inflow,
+                   lift_min_n=-f_least, lift_max_n=-f_most,
+                   max_tilt_rad=math.radians(max_tilt_deg), max_rate_rad_s=min(k[0], k[1]),
+                   max_yaw_rate_rad_s=k[2], max_speed_m_s=max_speed_m_s,
+                   max_position_jump_m=max_position_jump_m,
+                   max_velocity_jump_m_s=max_velocity_jump_m_s)
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,0 +1,101 @@
+"""Time per controller step (and per stick conversion) at the 100 Hz loop's inputs.
+
+Inputs: 20,000 state estimates and references recorded from a closed-loop
+flight of the square (``groundstation.control.simulate``, so the controllers
+see realistic, varying states), built before timing. Each controller's
+``step()`` is timed one call at a time with ``time.perf_counter_ns`` after a
+warm-up; the script prints median, p99 and max in microseconds. The target is
+p99 <= 50 us per step (issue 7); it exits with status 1 if a controller misses it.
+
+Run: ``.venv/bin/python benchmarks/bench_controller.py``
+"""
+
+from __future__ import annotations
+
+import gc
+import statistics
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from groundstation.control import (
+    LqrController,
+    PidController,
+    StickParams,
+    make_trajectory,
+    to_sticks,
+)
+from groundstation.control.hinf import HinfController, default_gain_path, load_hinf_gain
+from groundstation.control.simulate import simulate
+from groundstation.model import QuadrotorParams
+from groundstation.types import ControlOutput, Reference, StateEstimate
+
+N = 20_000
+WARMUP = 500
+TARGET_P99_US = 50.0
+
+
+def recorded_inputs() -> list[tuple[float, StateEstimate, Reference]]:
+    """(t, estimate, reference) along two laps of the square, repeated to N samples."""
+    sq = make_trajectory("square")
+    run = simulate(LqrController(), sq, 40.0)
+    out = []
+    for k in range(N):
+        i = k % len(run.t)
+        t = float(run.t[i])
+        q = run.quaternion[i]
+        est = StateEstimate(t=t, position=run.position[i].copy(), quaternion=q.copy(),
+                            velocity_body=run.velocity[i].copy(), omega=run.omega_cmd[i].copy(),
+                            gyro_bias=np.zeros(3), acc_bias=np.zeros(3),
+                            covariance_diag=np.zeros(16))
+        out.append((t, est, sq.sample(t)))
+    return out
+
+
+def time_calls(fn: Callable[[int], object]) -> list[float]:
+    """Per-call durations [us] of fn(k) for k in range(N), after a warm-up, GC paused."""
+    for k in range(WARMUP):
+        fn(k)
+    gc.disable()
+    try:
+        out = []
+        for k in range(N):
+            t0 = time.perf_counter_ns()
+            fn(k)
+            out.append((time.perf_counter_ns() - t0) / 1000.0)
+    finally:
+        gc.enable()
+    return out
+
+
+def main() -> int:
+    inputs = recorded_inputs()
+    controllers = {
+        "lqr-cv": LqrController(reference_model="velocity"),
+        "lqr-cp": LqrController(reference_model="position"),
+        "lqr-cv-rate-loop": LqrController(rate_loop_tau=0.064),
+        "pid": PidController(),
+        "hinf-rate-loop": HinfController(load_hinf_gain(default_gain_path(True))),
+    }
+    failed = False
+    print(f"{'step()':<20}{'median us':>10}{'p99 us':>10}{'max us':>10}")
+    for name, ctrl in controllers.items():
+        durations = time_calls(lambda k, c=ctrl: c.step(*inputs[k]))
+        p99 = float(np.percentile(durations, 99))
+        failed |= p99 > TARGET_P99_US
+        print(f"{name:<20}{statistics.median(durations):>10.1f}{p99:>10.1f}"
+              f"{max(durations):>10.1f}")
+    params = StickParams.from_quadrotor(QuadrotorParams())
+    outputs = [ControlOutput(omega=np.array([0.1, -0.2, 0.0]) * (k % 7 - 3), f_z=0.3 * (k % 5 - 2))
+               for k in range(N)]
+    durations = time_calls(lambda k: to_sticks(outputs[k], params))
+    print(f"{'to_sticks()':<20}{statistics.median(durations):>10.1f}"
+          f"{float(np.percentile(durations, 99)):>10.1f}{max(durations):>10.1f}")
+    print(f"target: step p99 <= {TARGET_P99_US:.0f} us -> {'FAIL' if failed else 'ok'}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
