@@ -27,6 +27,8 @@ app = typer.Typer(
 identify_app = typer.Typer(help="Identify model parameters from measurement CSVs.",
                            no_args_is_help=True)
 app.add_typer(identify_app, name="identify")
+synth_app = typer.Typer(help="Synthesise controller gains.", no_args_is_help=True)
+app.add_typer(synth_app, name="synth")
 
 ConfigOption = Annotated[Path, typer.Option("--config", "-c", help="YAML configuration file.")]
 
@@ -203,6 +205,37 @@ def identify_inflow(
     except IdentificationError as exc:
         raise _fail(str(exc), 2) from exc
     typer.echo(fit.report())
+
+
+@synth_app.command("hinf")
+def synth_hinf(
+    config: ConfigOption,
+    out: Annotated[Path, typer.Option(help="Gain file to write (.npz).")],
+    rate_loop: Annotated[bool, typer.Option(
+        help="Design on the model with the on-board rate-loop lag (Ch. 10.3).")] = True,
+) -> None:
+    """Synthesise the Ch. 10 H-infinity gain from the LMI (eq. 10.12-10.17) and save it.
+
+    Point ``controller.hinf.gain_file`` at the result to fly it. Needs cvxpy:
+    ``pip install 'groundstation[hinf]'``.
+    """
+    from groundstation.control.hinf import synthesise_hinf
+    from groundstation.control.hinf_design import HinfWeights
+    from groundstation.loop.inputs import quadrotor_params
+
+    cfg = load(config)
+    h = cfg.controller.hinf
+    weights = HinfWeights(eps=h.epsilon, reference_pole=h.reference_pole,
+                          noise_gain=h.noise_gain)
+    try:
+        gain = synthesise_hinf(quadrotor_params(cfg), include_rate_loop=rate_loop,
+                               weights=weights)
+    except GroundStationError as exc:  # also: cvxpy (the `hinf` extra) not installed
+        raise _fail(str(exc), 1) from exc
+    gain.save(out)
+    model = "with the rate-loop lag" if rate_loop else "on the thesis's model (no rate loop)"
+    typer.echo(f"H-infinity gain designed {model}: |F_s| = {float(abs(gain.F_s).max()):.3g}, "
+               f"written to {out}")
 
 
 def main() -> None:  # pragma: no cover - console entry point alternative

@@ -319,8 +319,11 @@ class PidConfig(_Model):
 class HinfConfig(_Model):
     """H-infinity controller (thesis Ch. 10): the loop uses a stored gain."""
 
-    gain_file: Path | None = None  # written by `gs synth hinf`; required when type is hinf
-    include_rate_loop: bool = True  # design on the model with the rate-loop lag (Ch. 10.3)
+    gain_file: Path | None = None
+    # a gain written by `gs synth hinf`; None = the packaged design selected below
+    include_rate_loop: bool = True
+    # design on the model with the rate-loop lag (Ch. 10.3): the thesis's model without
+    # it gave a controller that did not stabilise the real vehicle
     epsilon: PositiveFloat = 0.1  # D12 input weight (eq. 10.5), tuned
     reference_pole: PositiveFloat = 1.0  # a_i of W_r (eq. 10.10) [rad/s], tuned
     noise_gain: PositiveFloat = 0.01  # k of W_n (eq. 10.9), tuned
@@ -338,8 +341,9 @@ class ControllerConfig(_Model):
 
     @model_validator(mode="after")
     def _hinf_gain(self) -> ControllerConfig:
-        if self.type == "hinf" and self.hinf.gain_file is None:
-            raise ValueError("controller type 'hinf' needs hinf.gain_file (see `gs synth hinf`)")
+        gain = self.hinf.gain_file
+        if self.type == "hinf" and gain is not None and not gain.is_file():
+            raise ValueError(f"hinf.gain_file {str(gain)!r} does not exist (see `gs synth hinf`)")
         return self
 
 

@@ -141,3 +141,19 @@ def test_every_loss_encoding_reads_as_no_measurement(encoding: str) -> None:
     est_err = np.linalg.norm(result.trace["true_pos"] - result.trace["est_pos"], axis=1)
     window = (result.trace["t"] > 9.0) & (result.trace["t"] < 12.0)  # outage and recovery
     assert np.nanmax(est_err[window]) < 0.02  # reached 5 mm; the IMU carried the estimate
+
+
+def test_hinf_from_config_flies_only_when_designed_with_the_rate_loop() -> None:
+    """Thesis Ch. 10.3 through the whole stack: the packaged gain designed on the thesis's
+    model tilts over on the lagged virtual plant (the tilt failsafe lands it); the gain
+    designed with the rate-loop lag hovers and lands normally."""
+    lagged = fly_in_process(sim_config(**{"controller.type": "hinf"}), duration_s=6.0,
+                            max_time_s=60.0)
+    assert states(lagged)[:2] == [State.TAKEOFF, State.TRACK]
+    assert lagged.final_state is State.DONE
+    assert not any("tilt" in tr.reason for tr in lagged.transitions)
+    thesis = fly_in_process(sim_config(**{"controller.type": "hinf",
+                                          "controller.hinf.include_rate_loop": False}),
+                            duration_s=6.0, max_time_s=60.0)
+    land = next(tr for tr in thesis.transitions if tr.new is State.LAND)
+    assert "tilt" in land.reason

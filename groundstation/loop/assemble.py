@@ -38,5 +38,10 @@ def controller_from_config(config: GroundStationConfig) -> Controller:
             velocity_ki=p.velocity_ki, velocity_kd=p.velocity_kd, attitude_kp=p.attitude_kp,
             max_tilt_deg=p.max_tilt_deg,
         )
+    if c.type == "hinf":
+        from groundstation.control.hinf import HinfController, default_gain_path, load_hinf_gain
+
+        path = c.hinf.gain_file or default_gain_path(c.hinf.include_rate_loop)
+        return HinfController(load_hinf_gain(path), params=params)
     raise ConfigError(f"controller.type: {c.type!r}: unknown controller")
 
