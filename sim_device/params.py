@@ -58,6 +58,10 @@ class PlantParams:
     battery_droop_time : [s]
     initial_position : NED [m]; z = 0 is the floor
     initial_yaw : heading [rad]
+    impact_time : a touchdown stops the vehicle over this long [s] as far as the
+        accelerometer is concerned (the body rests at once): the IMU feels the
+        deceleration -v/impact_time, and clips it like the real one. 0.05 s: skids
+        and foam feet of a small quadrotor; thesis silent.
     """
 
     mass: float = 0.60
@@ -72,6 +76,7 @@ class PlantParams:
     battery_droop_time: float = 300.0
     initial_position: Vec3 = (0.0, 0.0, 0.0)
     initial_yaw: float = 0.0
+    impact_time: float = 0.05
 
     def __post_init__(self) -> None:
         _require(self.mass > 0 and self.g > 0, "plant.mass/g", (self.mass, self.g), "must be > 0")
@@ -82,6 +87,7 @@ class PlantParams:
         _require(self.rate_tau >= 0 and self.thrust_tau >= 0, "plant.rate_tau/thrust_tau",
                  (self.rate_tau, self.thrust_tau), "must be >= 0")
         _require(self.thrust_scale > 0, "plant.thrust_scale", self.thrust_scale, "must be > 0")
+        _require(self.impact_time > 0, "plant.impact_time", self.impact_time, "must be > 0")
         _require(0 <= self.battery_droop < 0.5 and self.battery_droop_time > 0,
                  "plant.battery_droop", (self.battery_droop, self.battery_droop_time),
                  "droop in [0, 0.5) over a positive time")

@@ -28,7 +28,9 @@ RK4 step with those ``omega(t)`` and ``lift(t)``; ``q`` is renormalised.
 Ground contact: at ``z >= 0`` with ``b * lift + m g >= 0`` (lift not exceeding the
 weight) the vehicle rests on the floor: it cannot sink, its velocity and rates
 are zero and it sits level, keeping its heading. A descent through the floor
-lands it the same way.
+lands it the same way; the accelerometer feels that touchdown as the deceleration
+``-v_body / impact_time`` for ``impact_time`` (the integral is the velocity lost),
+so an estimator integrating the IMU sees the vehicle stop.
 """
 
 from __future__ import annotations
@@ -47,11 +49,37 @@ class Plant:
     """
 
     __slots__ = (
-        "_a_lift", "_a_lift_half", "_a_rate", "_a_rate_half", "_droop_rate", "_inflow",
+        "_a_lift",
+        "_a_lift_half",
+        "_a_rate",
+        "_a_rate_half",
+        "_droop_rate",
+        "_impact",
+        "_impact_until",
+        "_inflow",
         "_thrust_map",
-        "dt", "lift", "lift_sp", "on_ground", "params",
-        "px", "py", "pz", "q0", "q1", "q2", "q3", "t",
-        "vx", "vy", "vz", "wx", "wx_sp", "wy", "wy_sp", "wz", "wz_sp",
+        "dt",
+        "lift",
+        "lift_sp",
+        "on_ground",
+        "params",
+        "px",
+        "py",
+        "pz",
+        "q0",
+        "q1",
+        "q2",
+        "q3",
+        "t",
+        "vx",
+        "vy",
+        "vz",
+        "wx",
+        "wx_sp",
+        "wy",
+        "wy_sp",
+        "wz",
+        "wz_sp",
     )
 
     def __init__(self, params: PlantParams, dt: float) -> None:
@@ -76,6 +104,8 @@ class Plant:
         self.on_ground = self.pz >= 0.0
         if self.on_ground:
             self.pz = 0.0
+        self._impact = (0.0, 0.0, 0.0)  # touchdown deceleration felt by the IMU, FRD
+        self._impact_until = -math.inf
 
     # ------------------------------------------------------------------ inputs
     def set_inputs(self, wx: float, wy: float, wz: float, lift: float) -> None:
@@ -170,6 +200,9 @@ class Plant:
 
     def land(self) -> None:
         """Rest on the floor: z = 0, no velocity or rates, level with the same heading."""
+        k = -1.0 / self.params.impact_time
+        self._impact = (k * self.vx, k * self.vy, k * self.vz)
+        self._impact_until = self.t + self.params.impact_time
         self.pz = 0.0
         self.vx = self.vy = self.vz = 0.0
         self.wx = self.wy = self.wz = 0.0
@@ -198,8 +231,13 @@ class Plant:
         q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
         if self.on_ground:
             g = p.g
-            return (-g * 2.0 * (q1 * q3 - q0 * q2), -g * 2.0 * (q2 * q3 + q0 * q1),
-                    -g * (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3))
+            fx = -g * 2.0 * (q1 * q3 - q0 * q2)
+            fy = -g * 2.0 * (q2 * q3 + q0 * q1)
+            fz = -g * (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3)
+            if self.t < self._impact_until:  # still decelerating from the touchdown
+                ix, iy, iz = self._impact
+                return fx + ix, fy + iy, fz + iz
+            return fx, fy, fz
         return (0.0, 0.0, (self.battery_factor() * self.lift + self._inflow * self.vz) / p.mass)
 
     def velocity_ned(self) -> tuple[float, float, float]:

@@ -186,3 +186,19 @@ def test_plant_step_matches_the_ground_station_model() -> None:
         got = [plant.px, plant.py, plant.pz, plant.q0, plant.q1, plant.q2, plant.q3,
                plant.vx, plant.vy, plant.vz]
         np.testing.assert_allclose(got, x, rtol=0, atol=1e-12)
+
+
+def test_touchdown_is_felt_by_the_accelerometer() -> None:
+    """The deceleration the IMU feels at touchdown integrates to the velocity lost
+    (independent answer: the free-fall speed at the floor, sqrt(2 g h))."""
+    params = PlantParams(initial_position=(0.0, 0.0, -0.2), impact_time=0.05)
+    plant = Plant(params, 0.002)
+    while not plant.on_ground:
+        plant.step()
+    felt = 0.0  # integral of (specific force z + g): the non-gravity deceleration
+    for _ in range(100):
+        felt += (plant.specific_force()[2] + G) * plant.dt
+        plant.step()
+    v_floor = math.sqrt(2.0 * G * 0.2)
+    assert felt == pytest.approx(-v_floor, rel=0.03)  # one 2 ms step of slack
+    assert plant.specific_force() == pytest.approx((0.0, 0.0, -G), abs=1e-12)  # then at rest

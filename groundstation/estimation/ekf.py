@@ -445,14 +445,21 @@ class Ekf:
         return nis, True
 
     def _reset_pose(self, pose: Pose) -> None:
-        """Re-initialise position and attitude from ``pose`` with the initial variance."""
+        """Re-initialise position and attitude from ``pose``, and forget the velocity's
+        certainty: all three get the initial variance and lose their correlations.
+
+        Persistent gating means the prediction, not Vicon, is wrong; that is almost
+        always a velocity error the IMU did not see (a touchdown or a knock that
+        saturated the accelerometer). Resetting the velocity variance lets the next
+        poses correct it within a few updates instead of gating them again.
+        """
         x, P = self._x, self._P
         x[0:3] = pose.position
         q = pose.quaternion / np.linalg.norm(pose.quaternion)
         x[3:7] = q if float(np.dot(q, x[3:7])) >= 0.0 else -q
-        P[0:6, :] = 0.0
-        P[:, 0:6] = 0.0
-        P.flat[: 6 * (N_ERR + 1) : N_ERR + 1] = self.params.initial_error_variance()[0:6]
+        P[0:9, :] = 0.0
+        P[:, 0:9] = 0.0
+        P.flat[: 9 * (N_ERR + 1) : N_ERR + 1] = self.params.initial_error_variance()[0:9]
 
     def _replay(self, pose: Pose) -> UpdateResult:
         """Apply a pose older than the filter time: restore the checkpoint at or before

@@ -64,7 +64,10 @@ class EkfParams:
         further ahead of it, are dropped [s]; also sets the history length.
     gate_reset_after : after this long [s] without an accepted fix and at
         least ``gate_reset_count`` consecutive gated poses, the next pose
-        re-initialises position and attitude (one bad estimate cannot lock the gate).
+        re-initialises position and attitude and resets the velocity variance (one
+        bad estimate cannot lock the gate). 0.2 s and 3 poses: an isolated outlier
+        is still rejected, but a touchdown that left the velocity wrong is corrected
+        within 0.2 s at 100 Hz Vicon and 0.3 s at 10 Hz.
     divergence_trace : covariance trace [16-layout units] that flags divergence in health.
     max_step : longest single integration step [s]; longer IMU gaps are sub-stepped.
     imu_repeat_on_identical : Algorithm 1 also for identical values with a new counter.
@@ -86,8 +89,8 @@ class EkfParams:
     initial_variance: tuple[float, ...] = field(default_factory=_default_p0)
     gate_probability: float = 0.9999
     max_vicon_delay: float = 0.2
-    gate_reset_after: float = 0.5
-    gate_reset_count: int = 10
+    gate_reset_after: float = 0.2
+    gate_reset_count: int = 3
     divergence_trace: float = 10.0
     max_step: float = 0.025
     imu_repeat_on_identical: bool = True
