@@ -40,7 +40,6 @@ from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from functools import partial
-from types import FrameType
 
 import numpy as np
 import structlog
@@ -52,6 +51,7 @@ from groundstation.loop.core import FlightCore, TickResult
 from groundstation.loop.inputs import DataFrontEnd
 from groundstation.loop.recorder import FlightRecorder
 from groundstation.loop.sdnotify import SdNotifier
+from groundstation.loop.signals import on_stop_signals
 from groundstation.loop.supervisor import State, Transition
 from groundstation.loop.ticklog import TickLogger
 from groundstation.loop.timing import TimingHistogram
@@ -114,25 +114,6 @@ class _Stats:
     ticks: int = 0
 
 
-@contextmanager
-def _signals(counter: list[int]) -> Iterator[None]:
-    """Count SIGINT/SIGTERM into ``counter[0]`` (main thread only; elsewhere a no-op)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum: int, frame: FrameType | None) -> None:
-        counter[0] += 1
-        log.warning("signal", signal=signal.Signals(signum).name, count=counter[0])
-
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
-
-
 class FlightDaemon:
     """One real-time flight. Build it, then :meth:`run` it (blocks until the flight ends).
 
@@ -160,6 +141,10 @@ class FlightDaemon:
         self.ready = threading.Event()
         """Set once every resource is open and the loop is about to start."""
 
+    def _on_signal(self, sig: signal.Signals) -> None:
+        self._signals[0] += 1
+        log.warning("signal", signal=sig.name, count=self._signals[0])
+
     @property
     def stop_requests(self) -> int:
         """Signals received plus one if the stop event is set."""
@@ -184,7 +169,7 @@ class FlightDaemon:
             telemetry = TelemetryPublisher.from_config(cfg.telemetry)
             stack.callback(telemetry.close)
             self.telemetry_endpoint = telemetry.endpoint
-            stack.enter_context(_signals(self._signals))
+            stack.enter_context(on_stop_signals(self._on_signal))
             stack.enter_context(_switch_interval(0.0005))
             link.send(self._config_msg)
             notifier.ready("preflight")
