@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.config import GroundStationConfig, apply_overrides, load_config
-from groundstation.loop.inprocess import FlightResult, InProcessFlight, fly_in_process
+from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.loop.inprocess import Event, FlightResult, InProcessFlight, fly_in_process
+from groundstation.loop.recorder import FlightRecorder, read_flight
 from groundstation.loop.supervisor import State
 from sim_device.lab import VirtualLab
 
@@ -28,6 +29,25 @@ def sim_config(**overrides: object) -> GroundStationConfig:
 
 def states(result: FlightResult) -> list[State]:
     return [tr.new for tr in result.transitions]
+
+
+def run_logged(cfg: GroundStationConfig, log_dir: Path, duration_s: float,
+               events: list[tuple[float, Event]]) -> FlightResult:
+    """Fly with the flight recorder on and check the log is complete: one row per tick
+    from the first DATA frame on, ending in the flight's final state."""
+    with FlightRecorder.create(log_dir, dump_config(cfg),
+                               {"supervisor_states": [s.name for s in State]}) as rec:
+        result = InProcessFlight(cfg, duration_s=duration_s, recorder=rec).run(
+            max_time_s=80.0, events=events)
+        directory = rec.directory
+    rows, meta, _ = read_flight(directory)
+    # Every tick is logged except the first one or two, which come before the first
+    # DATA frame (there is no IMU sample to record yet).
+    assert len(result.trace["t"]) - 3 <= len(rows) <= len(result.trace["t"])
+    assert np.all(np.diff(rows["t"]) > 0)
+    assert meta["supervisor_states"][rows["state"][-1]] == result.final_state.name
+    assert rows["state"][-1] == int(result.final_state)
+    return result
 
 
 def on_the_ground(result: FlightResult) -> bool:
@@ -59,9 +79,8 @@ def test_square_lqr_cv_tracks_without_lag_at_10hz_vicon() -> None:
     assert rms_xy < 0.07, rms_xy  # reached 0.043 m over 40 s; the thesis's Fig. 11.5 is ~0.1 m
 
 
-def test_vicon_outage_holds_then_resumes() -> None:
-    flight = InProcessFlight(sim_config(), duration_s=8.0)
-    result = flight.run(max_time_s=60.0, events=[(9.0, lambda f: f.lab.vicon_outage(1.0))])
+def test_vicon_outage_holds_then_resumes(tmp_path: Path) -> None:
+    result = run_logged(sim_config(), tmp_path, 8.0, [(9.0, lambda f: f.lab.vicon_outage(1.0))])
     seq = states(result)
     assert State.HOLD in seq
     assert seq[seq.index(State.HOLD) + 1] is State.TRACK  # Vicon came back within 2 s
@@ -71,52 +90,49 @@ def test_vicon_outage_holds_then_resumes() -> None:
     assert drift.max() < 0.1, drift.max()  # flew on the IMU estimate; reached ~1 cm
 
 
-def test_long_vicon_outage_lands_on_the_imu_estimate() -> None:
-    flight = InProcessFlight(sim_config(), duration_s=30.0)
-    result = flight.run(max_time_s=80.0, events=[(9.0, lambda f: f.lab.vicon_outage(30.0))])
+def test_long_vicon_outage_lands_on_the_imu_estimate(tmp_path: Path) -> None:
+    result = run_logged(sim_config(), tmp_path, 30.0,
+                        [(9.0, lambda f: f.lab.vicon_outage(30.0))])
     seq = states(result)
     assert seq[:4] == [State.TAKEOFF, State.TRACK, State.HOLD, State.LAND]
     assert "Vicon lost" in result.transitions[3].reason
     assert result.final_state is State.DONE and on_the_ground(result)
 
 
-def test_leaving_the_volume_lands() -> None:
+def test_leaving_the_volume_lands(tmp_path: Path) -> None:
     cfg = sim_config(**{"trajectory.name": "square", "safety.volume_x": [-0.2, 0.2]})
-    result = fly_in_process(cfg, duration_s=20.0, max_time_s=80.0)
+    result = run_logged(cfg, tmp_path, 20.0, [])
     land = next(tr for tr in result.transitions if tr.new is State.LAND)
     assert "left the volume" in land.reason
     assert result.final_state is State.DONE and on_the_ground(result)
 
 
-def test_pilot_switch_takes_over_at_once() -> None:
-    flight = InProcessFlight(sim_config(), duration_s=20.0)
-    result = flight.run(max_time_s=60.0,
-                        events=[(10.0, lambda f: f.lab.set_pilot(serial_enable=False))])
+def test_pilot_switch_takes_over_at_once(tmp_path: Path) -> None:
+    result = run_logged(sim_config(), tmp_path, 20.0,
+                        [(10.0, lambda f: f.lab.set_pilot(serial_enable=False))])
     assert result.final_state is State.PILOT and not result.success
     took_over = result.transitions[-1].t
     assert took_over - 10.0 < 0.05  # the next DATA frame or two
     assert result.lab.truth.ctrl_mask == 0  # the vehicle is the pilot's
 
 
-def test_link_loss_stops_and_the_watchdog_hands_back() -> None:
-    flight = InProcessFlight(sim_config(), duration_s=20.0)
-    result = flight.run(max_time_s=60.0, events=[(10.0, lambda f: f.lab.stall_data(5.0))])
+def test_link_loss_stops_and_the_watchdog_hands_back(tmp_path: Path) -> None:
+    result = run_logged(sim_config(), tmp_path, 20.0,
+                        [(10.0, lambda f: f.lab.stall_data(5.0))])
     assert result.final_state is State.LINK_LOST and not result.success
     assert 10.3 <= result.transitions[-1].t < 10.4  # link_loss_s = 0.3 s
     assert result.lab.truth.ctrl_mask == 0
 
 
-def test_sigterm_lands_then_second_signal_hands_back() -> None:
+def test_sigterm_lands_then_second_signal_hands_back(tmp_path: Path) -> None:
     def stop(f: InProcessFlight) -> None:
         f.stop_requests += 1
 
-    flight = InProcessFlight(sim_config(), duration_s=30.0)
-    result = flight.run(max_time_s=60.0, events=[(10.0, stop)])
+    result = run_logged(sim_config(), tmp_path / "one", 30.0, [(10.0, stop)])
     assert states(result)[-3:] == [State.LAND, State.DISARM, State.DONE]
     assert result.success and on_the_ground(result)
 
-    flight = InProcessFlight(sim_config(), duration_s=30.0)
-    result = flight.run(max_time_s=60.0, events=[(10.0, stop), (10.5, stop)])
+    result = run_logged(sim_config(), tmp_path / "two", 30.0, [(10.0, stop), (10.5, stop)])
     assert states(result)[-2:] == [State.LAND, State.HANDBACK]
     assert result.success and result.lab.truth.ctrl_mask == 0
 
