@@ -17,7 +17,10 @@ and the real-time modes share one plant, one firmware and one Vicon.
   late ticks are counted as overruns.
 * **Stop.** When ``stop`` is set, after ``duration``, or on SIGINT/SIGTERM (handlers
   are installed only when running in the main thread); the ground truth is written
-  as ``.npz`` (:mod:`sim_device.truth`) on every way out.
+  as ``.npz`` (:mod:`sim_device.truth`) on every way out, with one extra key,
+  ``start_monotonic``: the ``time.monotonic()`` of simulated time 0 [s], so a truth
+  row's monotonic time is ``start_monotonic + t`` and the truth lines up with a
+  flight log's monotonic stamps (the evaluation's ``gs report LOG --truth``).
 """
 
 from __future__ import annotations
@@ -27,20 +30,22 @@ import errno
 import fcntl
 import os
 import select
-import signal
 import socket
 import struct
 import termios
 import threading
 import time
 import tty
-from collections.abc import Callable, Iterator
+import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from types import FrameType
 from typing import TYPE_CHECKING
 
+import numpy as np
+
+from groundstation.loop.signals import on_stop_signals
 from sim_device.lab import LabStats, VirtualLab
 
 if TYPE_CHECKING:
@@ -146,24 +151,6 @@ class _Pty:
                 os.close(fd)
 
 
-@contextlib.contextmanager
-def _stop_on_signals(stop: threading.Event) -> Iterator[None]:
-    """Set ``stop`` on SIGINT/SIGTERM while inside (main thread only; elsewhere a no-op)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum: int, frame: FrameType | None) -> None:
-        stop.set()
-
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
-
-
 def run_sim_device(
     config: GroundStationConfig,
     stop: threading.Event | None = None,
@@ -199,29 +186,43 @@ def run_sim_device(
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     counters = {"overruns": 0, "vicon_errors": 0}
     wall0, cpu0 = time.monotonic(), time.process_time()
+    start = wall0  # simulated time 0 on the monotonic clock; reset when the clock starts
     try:
         info = SimDeviceInfo(pty.path, target, info_path.with_suffix(".npz"))
         say(f"virtual X-3D on {pty.path} ({lab.params.link.baud} baud); "
             f"virtual Vicon -> udp://{target[0]}:{target[1]} at {lab.params.vicon.rate_hz:g} Hz")
         if on_ready is not None:
             on_ready(info)
-        with _stop_on_signals(stop):
-            _loop(lab, pty, sock, target, stop, tick, duration, counters)
+        with on_stop_signals(lambda _sig: stop.set()):
+            start = time.monotonic()
+            _loop(lab, pty, sock, target, stop, tick, duration, counters, start)
     finally:
         wall, cpu = time.monotonic() - wall0, time.process_time() - cpu0
         sock.close()
         pty.close()
         saved = lab.truth_log.save(info_path)
+        _add_start_monotonic(saved, start)
         say(f"ground truth ({len(lab.truth_log)} rows) written to {saved}")
     return SimDeviceResult(info, lab.stats(), wall, cpu, counters["overruns"], pty.dropped,
                            counters["vicon_errors"])
 
 
+def _add_start_monotonic(path: Path, start: float) -> None:
+    """Add ``start_monotonic`` (the monotonic time of simulated time 0 [s]) to a saved
+    truth ``.npz``: one more ``.npy`` member in the archive, exactly as ``np.savez`` writes
+    each array, so ``np.load(path)["start_monotonic"]`` reads it."""
+    with zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as archive, \
+            archive.open("start_monotonic.npy", "w") as member:
+        np.lib.format.write_array(member, np.array(start, dtype=float))
+
+
 def _loop(lab: VirtualLab, pty: _Pty, sock: socket.socket, target: tuple[str, int],
           stop: threading.Event, tick: float, duration: float | None,
-          counters: dict[str, int]) -> None:
-    """The real-time loop: advance to the wall clock, exchange bytes, sleep to the next tick."""
-    start = time.monotonic()
+          counters: dict[str, int], start: float) -> None:
+    """The real-time loop: advance to the wall clock, exchange bytes, sleep to the next tick.
+
+    start : ``time.monotonic()`` of simulated time 0 [s].
+    """
     deadline = tick
     end = float("inf") if duration is None else duration
     while not stop.is_set():

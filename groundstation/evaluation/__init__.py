@@ -1,0 +1,33 @@
+"""Evaluation: the flights of thesis Ch. 11 in the virtual lab, scored from ground truth.
+
+``gs eval`` is :func:`run_eval` (the suite of :mod:`.scenarios`, in-process with the
+simulated clock or in real time over the pty and UDP); ``gs report LOG`` is
+:func:`report_flight` (one recorded flight, with or without the virtual lab's
+truth). Both write ``report.md``, ``metrics.json`` and PNG figures.
+
+>>> from groundstation.config import load_config
+>>> from groundstation.evaluation import run_eval
+>>> report = run_eval(load_config("config/sim.yaml"), fast=True, out_dir="eval")  # doctest: +SKIP
+>>> report.metrics["square-lqr-cv"]["lag_s"]  # doctest: +SKIP
+"""
+
+from groundstation.evaluation.record import FlightRecord, record_from_log, record_from_trace
+from groundstation.evaluation.report import FlightReport, report_flight
+from groundstation.evaluation.scenarios import SUITE, Scenario, select
+from groundstation.evaluation.scoring import flight_metrics
+from groundstation.evaluation.suite import EvalReport, ScenarioOutcome, run_eval
+
+__all__ = [
+    "SUITE",
+    "EvalReport",
+    "FlightRecord",
+    "FlightReport",
+    "Scenario",
+    "ScenarioOutcome",
+    "flight_metrics",
+    "record_from_log",
+    "record_from_trace",
+    "report_flight",
+    "run_eval",
+    "select",
+]

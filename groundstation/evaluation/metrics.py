@@ -1,0 +1,160 @@
+"""Flight metrics: pure functions of aligned time histories.
+
+Every function takes numpy arrays and returns numbers; nothing here knows how a
+flight was flown. Positions are NED [m], times [s], quaternions scalar-first.
+
+* tracking error: RMS and maximum Euclidean distance between two paths;
+* time lag: the delay of the flown path behind the reference by
+  cross-correlation (:func:`groundstation.control.metrics.time_lag`, refined to
+  below one sample by a parabola through the correlation peak) after
+  resampling onto a uniform grid, over the axes on which the reference moves;
+* step figures: overshoot and the 2 % settling time
+  (:func:`groundstation.control.metrics.step_metrics` with ``band = 0.02``);
+* tilt from a quaternion, percentiles of per-tick timings, and the lap mean
+  of a periodic path (thesis Fig. 11.5 shows the mean of five laps).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from groundstation.control.metrics import StepMetrics, step_metrics, time_lag
+from groundstation.types import FloatArray
+
+SETTLING_BAND = 0.02
+"""Settling band as a fraction of the step size (2 %)."""
+
+MOVING_STD_M = 0.01
+"""An axis whose reference varies by less than this (standard deviation) [m] does not move."""
+
+
+def error_norms(path: FloatArray, reference: FloatArray) -> FloatArray:
+    """Euclidean distance per row between (N, d) ``path`` and ``reference`` [m]."""
+    return np.asarray(np.linalg.norm(np.asarray(path) - np.asarray(reference), axis=1))
+
+
+def rms(values: FloatArray) -> float:
+    """Root mean square of ``values`` (NaN for an empty array)."""
+    v = np.asarray(values, dtype=float)
+    return float(np.sqrt(np.mean(v * v))) if v.size else math.nan
+
+
+def tracking_errors(path: FloatArray, reference: FloatArray) -> dict[str, float]:
+    """RMS (3-D and per axis) and maximum 3-D error of (N, 3) ``path`` against ``reference``.
+
+    Keys ``rms_m``, ``rms_x_m``, ``rms_y_m``, ``rms_z_m``, ``max_m`` [m]; NaN when N = 0.
+    """
+    p, r = np.asarray(path, dtype=float), np.asarray(reference, dtype=float)
+    if len(p) == 0:
+        return dict.fromkeys(("rms_m", "rms_x_m", "rms_y_m", "rms_z_m", "max_m"), math.nan)
+    d = error_norms(p, r)
+    per_axis = np.sqrt(np.mean((p - r) ** 2, axis=0))
+    return {"rms_m": rms(d), "rms_x_m": float(per_axis[0]), "rms_y_m": float(per_axis[1]),
+            "rms_z_m": float(per_axis[2]), "max_m": float(np.max(d))}
+
+
+def resample(t: FloatArray, values: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
+    """Linear interpolation of (N,) or (N, d) ``values`` at ``t`` onto a grid of step ``dt``."""
+    t = np.asarray(t, dtype=float)
+    grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
+    grid = grid[grid <= t[-1]]
+    v = np.asarray(values, dtype=float).reshape(len(t), -1)
+    out = np.column_stack([np.interp(grid, t, v[:, k]) for k in range(v.shape[1])])
+    return grid, out
+
+
+def moving_axes(reference: FloatArray, threshold_m: float = MOVING_STD_M) -> list[int]:
+    """Indices of the columns of (N, d) ``reference`` whose standard deviation exceeds
+    ``threshold_m``: the axes a lag can be measured on."""
+    std = np.std(np.asarray(reference, dtype=float), axis=0)
+    return [k for k in range(std.shape[0]) if std[k] > threshold_m]
+
+
+def lag_s(t: FloatArray, path: FloatArray, reference: FloatArray, *, dt: float = 0.01,
+          max_lag_s: float = 3.0) -> float:
+    """Delay [s] of ``path`` behind ``reference`` (N, 3) sampled at times ``t`` (N,).
+
+    Resampled to a uniform ``dt`` grid; the correlations of the axes on which the
+    reference moves are summed (so the x and y of a square give one lag).
+    Positive: the vehicle is behind. NaN if the reference does not move (hover,
+    steps) or the window is shorter than three samples.
+    """
+    axes = moving_axes(reference)
+    if not axes or len(t) < 3 or t[-1] - t[0] < 3 * dt:
+        return math.nan
+    _, ref = resample(t, np.asarray(reference)[:, axes], dt)
+    _, flown = resample(t, np.asarray(path)[:, axes], dt)
+    return time_lag(flown, ref, dt, max_lag_s=max_lag_s)
+
+
+def step_figures(t: FloatArray, y: FloatArray, *, t_step: float, initial: float,
+                 final: float) -> dict[str, float]:
+    """Overshoot [%], 2 % settling time [s], 10-90 % rise time [s] and steady-state error [m]
+    of ``y(t)`` for a set-point step ``initial -> final`` at ``t_step``.
+
+    ``t`` and ``y`` should cover the step and enough time after it to settle (the
+    steady-state error is the mean error over the last second).
+    """
+    m: StepMetrics = step_metrics(np.asarray(t), np.asarray(y), t_step=t_step,
+                                  initial=initial, final=final, band=SETTLING_BAND)
+    return {"overshoot_pct": 100.0 * m.overshoot, "settling_s": m.settling_time,
+            "rise_s": m.rise_time, "steady_state_m": m.steady_state_error}
+
+
+def tilt_deg(q: FloatArray) -> FloatArray:
+    """Angle between body z and earth z [deg] for (N, 4) scalar-first unit quaternions.
+
+    ``cos(tilt) = R(q)[2, 2] = q0^2 - q1^2 - q2^2 + q3^2`` (``R(q) = eCb``).
+    """
+    q = np.asarray(q, dtype=float)
+    c = q[:, 0] ** 2 - q[:, 1] ** 2 - q[:, 2] ** 2 + q[:, 3] ** 2
+    return np.asarray(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def percentiles(values: FloatArray, scale: float = 1.0,
+                qs: tuple[float, ...] = (50.0, 99.0)) -> list[float]:
+    """Percentiles ``qs`` of the finite ``values`` times ``scale``, then their maximum
+    (all NaN if there are none)."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return [math.nan] * (len(qs) + 1)
+    return [float(x) * scale for x in (*np.percentile(v, qs), np.max(v))]
+
+
+def track_clock(t: FloatArray, active: npt.NDArray[np.bool_]) -> FloatArray:
+    """Time spent in the ``active`` rows so far [s]: the trajectory's own clock.
+
+    t : (N,) row times; active : (N,) rows in which the trajectory runs (TRACK).
+    A row adds its spacing to the previous row only if both rows are active,
+    so the clock starts at 0 on the first active row and pauses outside them,
+    as :class:`groundstation.loop.mission.Mission` pauses it in HOLD.
+    """
+    t = np.asarray(t, dtype=float)
+    a = np.asarray(active, dtype=bool)
+    inc = np.zeros_like(t)
+    inc[1:] = np.diff(t) * (a[1:] & a[:-1])
+    return np.cumsum(inc)
+
+
+def lap_mean(clock: FloatArray, path: FloatArray, period_s: float, laps: int,
+             first: int = 0, dt: float = 0.01) -> tuple[FloatArray, FloatArray]:
+    """Mean over ``laps`` whole laps, from lap ``first`` on, of a periodic (N, d) ``path``
+    sampled at trajectory time ``clock`` (N,): the phase grid (M,) [s] and mean path (M, d).
+
+    Lap ``k`` covers ``k * period_s <= clock < (k + 1) * period_s``; each lap is
+    interpolated onto the same phase grid before averaging.
+    """
+    phase = np.arange(0.0, period_s, dt)
+    p = np.asarray(path, dtype=float).reshape(len(clock), -1)
+    c = np.asarray(clock, dtype=float)
+    acc = np.zeros((len(phase), p.shape[1]))
+    for k in range(first, first + laps):
+        inside = (c >= k * period_s - dt) & (c <= (k + 1) * period_s + dt)
+        ck, pk = c[inside], p[inside]
+        for j in range(p.shape[1]):
+            acc[:, j] += np.interp(phase + k * period_s, ck, pk[:, j])
+    return phase, acc / laps

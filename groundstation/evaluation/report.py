@@ -1,0 +1,168 @@
+"""Writing results: ``metrics.json``, the Markdown tables, and ``gs report LOG``.
+
+:func:`report_flight` is the whole of ``gs report``: one logged flight (real or
+against the virtual lab, with its truth file) -> ``report.md``,
+``metrics.json`` and ``flight.png``. The suite's report
+(:mod:`groundstation.evaluation.suite`) uses the same writers.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from groundstation import __version__
+from groundstation.evaluation.metrics import SETTLING_BAND, track_clock
+from groundstation.evaluation.plotting import flight_figure
+from groundstation.evaluation.record import FlightRecord, record_from_log
+from groundstation.evaluation.scoring import StepSpec, flight_metrics
+from groundstation.loop.supervisor import State, Transition
+
+# (metrics key, column heading, scale, format)
+COLUMNS: tuple[tuple[str, str, float, str], ...] = (
+    ("rms_m", "RMS [cm]", 100.0, ".2f"),
+    ("max_m", "max [cm]", 100.0, ".2f"),
+    ("lag_s", "lag [s]", 1.0, ".3f"),
+    ("overshoot_pct", "overshoot [%]", 1.0, ".1f"),
+    ("settling_s", "settling 2 % [s]", 1.0, ".2f"),
+    ("est_rms_m", "est. RMS [cm]", 100.0, ".2f"),
+    ("est_max_m", "est. max [cm]", 100.0, ".2f"),
+    ("hold_s", "HOLD [s]", 1.0, ".2f"),
+    ("max_tilt_deg", "max tilt [deg]", 1.0, ".1f"),
+    ("compute_p50_us", "tick p50 [us]", 1.0, ".0f"),
+    ("compute_p99_us", "tick p99 [us]", 1.0, ".0f"),
+)
+REAL_TIME_COLUMNS: tuple[tuple[str, str, float, str], ...] = (
+    ("jitter_p99_ms", "jitter p99 [ms]", 1.0, ".2f"),
+    ("latency_p99_ms", "latency p99 [ms]", 1.0, ".2f"),
+)
+
+DEFINITIONS = f"""\
+Definitions. Errors are Euclidean distances between the position and the reference
+(NED), over the supervisor's TRACK phase after its first 2 s of trajectory time
+(the end of the take-off); "position" is the virtual lab's ground truth unless a
+row says otherwise. Lag: delay of the position behind the reference that maximises
+their cross-correlation, over the axes on which the reference moves, refined below
+one tick by a parabola through the peak (steps included; blank for a hover).
+Overshoot and settling time: step flights, on the stepped axis, settling to within
+{100 * SETTLING_BAND:g} % of the step. Est.: estimate against truth over the same window.
+HOLD: time spent holding on the IMU estimate. Max tilt: while airborne, from truth.
+Tick p50/p99: time per flight-core tick (see "timing" above for how it was measured).
+"""
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` with NaN/inf floats as None and numpy scalars as Python numbers."""
+    if isinstance(value, Mapping):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def transitions_json(transitions: Sequence[Transition], t0: float) -> list[list[Any]]:
+    """``[[t - t0, old, new, reason], ...]`` for metrics.json."""
+    return [[round(tr.t - t0, 3), tr.old.name, tr.new.name, tr.reason] for tr in transitions]
+
+
+def write_json(path: Path, data: Mapping[str, Any]) -> Path:
+    """Write ``data`` as indented JSON (NaN -> null)."""
+    path.write_text(json.dumps(jsonable(data), indent=2) + "\n", encoding="utf-8")
+    return path
+
+
+def cell(metrics: Mapping[str, Any], key: str, scale: float, fmt: str) -> str:
+    """One table cell: the scaled value, or blank if missing / not a number."""
+    v = metrics.get(key)
+    if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
+        return ""
+    return format(v * scale, fmt)
+
+
+def metrics_table(leading: Sequence[str], rows: Sequence[tuple[Sequence[str], Mapping[str, Any]]],
+                  real_time: bool) -> str:
+    """A Markdown table: the ``leading`` columns, then :data:`COLUMNS` (and the real-time
+    ones). rows : (leading cells as text, metrics) per row."""
+    cols = COLUMNS + (REAL_TIME_COLUMNS if real_time else ())
+    head = [*leading, *(heading for _, heading, _, _ in cols)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for lead, m in rows:
+        values = [cell(m, key, scale, fmt) for key, _, scale, fmt in cols]
+        lines.append("| " + " | ".join([*lead, *values]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def step_from_reference(record: FlightRecord, min_step_m: float = 0.01) -> StepSpec | None:
+    """The set-point step of a logged flight, read from its reference while tracking.
+
+    A step flight's reference is constant apart from one jump: returns ``(axis,
+    trajectory time of the jump [s], before, after)`` for the axis that jumped,
+    or None if the reference moves otherwise (or not at all).
+    """
+    track = record.during(State.TRACK)
+    if track.sum() < 3:
+        return None
+    clock = track_clock(record.t, track)[track]
+    ref = record.ref_pos[track]
+    jumps = np.abs(np.diff(ref, axis=0))
+    moving = np.argwhere(jumps > 1e-9)
+    if len(moving) != 1 or jumps[moving[0][0], moving[0][1]] < min_step_m:
+        return None
+    i, axis = int(moving[0][0]), int(moving[0][1])
+    return axis, float(clock[i + 1]), float(ref[i, axis]), float(ref[i + 1, axis])
+
+
+@dataclass(frozen=True)
+class FlightReport:
+    """What :func:`report_flight` wrote and computed."""
+
+    record: FlightRecord
+    metrics: dict[str, Any]
+    report_md: Path
+    metrics_json: Path
+    figure: Path | None
+
+
+def report_flight(log: str | Path, truth: str | Path | None = None,
+                  out_dir: str | Path | None = None, *, figures: bool = True) -> FlightReport:
+    """Metrics and figure of one recorded flight (``gs report LOG [--truth T] [--out DIR]``).
+
+    log : flight-log directory; truth : the virtual lab's truth file (.npz) of the
+    same run, else the metrics are computed from the estimate and labelled so;
+    out_dir : default ``<log>/report``. RecorderError if the files cannot be read
+    or do not belong together; GroundStationError if figures are asked for and
+    matplotlib is missing.
+    """
+    record = record_from_log(log, truth)
+    out = Path(out_dir) if out_dir is not None else Path(log) / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    metrics = flight_metrics(record, step=step_from_reference(record))
+    t0 = float(record.t[0])
+    figure = flight_figure(record, out / "flight.png", f"flight {Path(log).name}") \
+        if figures else None
+    mj = write_json(out / "metrics.json", {
+        "format": "groundstation flight report", "version": __version__, "log": str(log),
+        "truth_file": str(truth) if truth is not None else None, "metrics": metrics,
+        "transitions": transitions_json(record.transitions, t0)})
+    table = metrics_table(["flight", "end"], [([Path(log).name, metrics["final_state"]], metrics)],
+                          real_time=True)
+    lines = [f"# Flight report: {Path(log).name}", "",
+             f"- position judged from: **{record.truth_source}**",
+             f"- timing: {record.timing_source}",
+             f"- states: {' -> '.join(tr.new.name for tr in record.transitions)}", "",
+             table, DEFINITIONS]
+    if figure is not None:
+        lines += ["", f"![flight]({figure.name})", ""]
+    md = out / "report.md"
+    md.write_text("\n".join(lines), encoding="utf-8")
+    return FlightReport(record, metrics, md, mj, figure)

@@ -1,0 +1,175 @@
+"""Fly one scenario: in-process on the simulated clock, or in real time over pty and UDP.
+
+Both runners build the same :class:`~groundstation.loop.core.FlightCore` from
+:func:`~groundstation.evaluation.scenarios.scenario_config` (trajectory,
+controller, duration) and return a :class:`FlightRecord`:
+
+* :func:`run_in_process` flies :class:`~groundstation.loop.inprocess.InProcessFlight`
+  and times every ``FlightCore.tick`` with ``time.perf_counter`` (the code's
+  back-to-back cost, not a real-time figure);
+* :func:`run_real_time` starts the virtual lab (``gs sim-device``) in a child
+  process, flies :class:`~groundstation.loop.daemon.FlightDaemon` against it in
+  real time, then reads the flight log and the lab's truth file, aligned on the
+  monotonic clock. Timing comes from the log (compute, jitter, latency).
+
+:func:`simulate_model` flies the same controller and trajectory on the
+controller package's model-only simulator (true state fed back, no estimator):
+the "simulation" curve of thesis Fig. 11.4.
+"""
+
+from __future__ import annotations
+
+import re
+import select
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from groundstation.config import GroundStationConfig, apply_overrides, dump_config
+from groundstation.control.simulate import SimPlant, SimResult, simulate
+from groundstation.errors import ConfigError, GroundStationError
+from groundstation.evaluation.record import FlightRecord, record_from_log, record_from_trace
+from groundstation.evaluation.scenarios import (
+    Scenario,
+    scenario_config,
+    scenario_controller,
+    scenario_trajectory,
+)
+from groundstation.loop.assemble import controller_from_config
+from groundstation.loop.core import FlightCore, TickResult
+from groundstation.loop.daemon import FlightDaemon
+from groundstation.loop.inprocess import InProcessFlight
+from groundstation.loop.inputs import InputHealth, VehicleStatus, quadrotor_params
+from groundstation.types import ImuSample, Pose
+
+MARGIN_S = 60.0
+"""Simulated time allowed beyond the trajectory for preflight, take-off and landing [s]."""
+
+SIM_START_TIMEOUT_S = 20.0
+"""How long the virtual lab's child process may take to print its pty path [s]."""
+
+
+class _TickProbe:
+    """Stands in for ``FlightCore.tick``: times each call and keeps the Vicon poses."""
+
+    def __init__(self, core: FlightCore) -> None:
+        self._tick = core.tick
+        self.compute: list[float] = []
+        self.vicon: list[tuple[float, float, float, float]] = []
+
+    def __call__(self, t: float, imu: ImuSample | None, poses: Sequence[Pose],
+                 vehicle: VehicleStatus, health: InputHealth,
+                 stop_requests: int = 0) -> TickResult:
+        start = time.perf_counter()
+        result = self._tick(t, imu, poses, vehicle, health, stop_requests)
+        self.compute.append(time.perf_counter() - start)
+        for pose in poses:
+            p = pose.position
+            self.vicon.append((pose.t, float(p[0]), float(p[1]), float(p[2])))
+        return result
+
+
+def run_in_process(scenario: Scenario, base: GroundStationConfig) -> FlightRecord:
+    """Fly ``scenario`` in-process against the virtual lab (deterministic for a seed)."""
+    cfg = scenario_config(scenario, base)
+    flight = InProcessFlight(cfg, controller=scenario_controller(cfg),
+                             trajectory=scenario_trajectory(scenario, cfg),
+                             duration_s=scenario.duration_s)
+    probe = _TickProbe(flight.core)
+    flight.core.tick = probe  # type: ignore[method-assign]  # timing wrapper, same signature
+    result = flight.run(max_time_s=scenario.duration_s + MARGIN_S)
+    return record_from_trace(result, np.array(probe.compute), np.array(probe.vicon))
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that was free a moment ago."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@contextmanager
+def _sim_device(config_file: Path, log_file: Path) -> Iterator[str]:
+    """Run ``gs sim-device`` in a child process; yield its pty path; stop it (SIGINT, which
+    writes the truth file) on the way out."""
+    cmd = [sys.executable, "-c", "from groundstation.cli import app; app()",
+           "sim-device", "--config", str(config_file)]
+    with log_file.open("w") as err:
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True)
+    try:
+        assert proc.stdout is not None
+        ready, _, _ = select.select([proc.stdout], [], [], SIM_START_TIMEOUT_S)
+        line = proc.stdout.readline() if ready else ""
+        match = re.search(r" on (\S+) \(", line)
+        if match is None:
+            raise GroundStationError(f"the virtual lab did not start ({line.strip()!r}; "
+                                     f"see {log_file})")
+        yield match.group(1)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(10.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        if proc.stdout is not None:
+            proc.stdout.close()
+
+
+def _daemon(scenario: Scenario, cfg: GroundStationConfig) -> FlightDaemon:
+    """A daemon flying the scenario's controller and trajectory.
+
+    FlightDaemon takes neither a controller nor a trajectory, so its core is
+    replaced before the flight by one built exactly as the in-process runner's.
+    Until the controller factory builds 'hinf' the daemon is constructed with
+    the default controller first (its core is replaced anyway).
+    """
+    try:
+        controller_from_config(cfg)
+        daemon = FlightDaemon(cfg, duration_s=scenario.duration_s)
+    except ConfigError:
+        daemon = FlightDaemon(apply_overrides(cfg, {"controller.type": "lqr-cv"}),
+                              duration_s=scenario.duration_s)
+    daemon.core = FlightCore(cfg, controller=scenario_controller(cfg),
+                             trajectory=scenario_trajectory(scenario, cfg),
+                             duration_s=scenario.duration_s)
+    return daemon
+
+
+def run_real_time(scenario: Scenario, base: GroundStationConfig, workdir: Path) -> FlightRecord:
+    """Fly ``scenario`` in real time: the virtual lab in a child process on a pty and UDP,
+    the flight daemon in this process. The flight log, the truth file, the lab's log and
+    the configuration flown are left in ``workdir/<scenario>/``."""
+    d = workdir / scenario.name
+    d.mkdir(parents=True, exist_ok=True)
+    truth = d / "truth.npz"
+    cfg = apply_overrides(scenario_config(scenario, base), {
+        "vicon.port": free_udp_port(), "telemetry.enabled": False,
+        "logging.flight_log_dir": str(d), "sim.truth_file": str(truth)})
+    config_file = d / "config.yaml"
+    config_file.write_text(dump_config(cfg), encoding="utf-8")
+    with _sim_device(config_file, d / "sim-device.log") as pty_path:
+        cfg = apply_overrides(cfg, {"serial.port": pty_path})
+        summary = _daemon(scenario, cfg).run()
+        time.sleep(0.2)  # the lab records the final COMMAND (mask 0) before it stops
+    return record_from_log(summary.log_dir, truth)
+
+
+def simulate_model(scenario: Scenario, base: GroundStationConfig) -> SimResult:
+    """The scenario's controller and trajectory on the model-only simulator
+    (:func:`groundstation.control.simulate.simulate`) with the lab's rate-loop lag,
+    command delay and thrust error; starts on the trajectory, lasts ``duration_s``."""
+    cfg = scenario_config(scenario, base)
+    assert cfg.sim is not None  # scenario_config checked it
+    controller = scenario_controller(cfg) or controller_from_config(cfg)
+    plant = SimPlant(rate_tau=cfg.sim.rate_loop_tau_s, delay_s=cfg.sim.command_delay_s,
+                     thrust_scale=cfg.sim.thrust_scale)
+    return simulate(controller, scenario_trajectory(scenario, cfg), scenario.duration_s,
+                    params=quadrotor_params(cfg), plant=plant, rate_hz=cfg.controller.rate_hz)

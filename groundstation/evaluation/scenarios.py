@@ -1,0 +1,175 @@
+"""The evaluation suite as data: the flights of thesis Ch. 11 (and the issue's additions).
+
+A :class:`Scenario` names a trajectory, a controller, the Vicon rate, how long the
+trajectory is flown and the configuration overrides that inject faults. The
+runners (:mod:`groundstation.evaluation.runner`) turn one into a flight, in-process
+on the simulated clock or in real time over the pty and UDP; both fly the same
+:class:`~groundstation.loop.core.FlightCore` with the same configuration.
+
+Choices where the thesis leaves room (each stated in the report):
+
+* hover (Ch. 11.1) uses the constant-position LQR, as the thesis did; every
+  other flight uses Vicon at 10 Hz, as the thesis did after Ch. 11.1;
+* steps (Ch. 11.2) come :data:`STEP_TIME_S` after tracking starts, so the
+  take-off transient has decayed; size ``trajectory.step_m`` (0.5 m);
+* faults are configuration (``sim.vicon.outages`` in lab time,
+  ``sim.thrust_scale``), so a real-time flight gets them too;
+* the tracking metrics skip the first ``settle_s`` of tracking (the end of the
+  take-off, which is judged to 10 cm).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from groundstation.config import GroundStationConfig, apply_overrides
+from groundstation.control.base import Controller
+from groundstation.control.hinf import HinfController, default_gain_path, load_hinf_gain
+from groundstation.control.trajectories import trajectory_from_config
+from groundstation.control.trajectory import Trajectory
+from groundstation.errors import ConfigError
+from groundstation.loop.inputs import quadrotor_params
+from groundstation.types import FloatArray
+
+STEP_TIME_S = 3.0
+"""Trajectory time of the set-point step [s]."""
+
+OUTAGE_START_S = 17.0
+"""Lab time of the Vicon outage [s]: about 7.5 s into the square (take-off ends near
+9.5 s), halfway along its east edge, flown southwards."""
+
+CONTROLLERS = ("pid", "lqr-cp", "lqr-cv", "hinf-thesis", "hinf-rate-loop")
+"""Controller names: the configuration's types plus the two stored H-infinity designs."""
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One evaluation flight.
+
+    name : unique id (file names, metrics keys); group : figure it belongs to
+    title : one line for the report; thesis : the thesis figure it mirrors
+    trajectory : a ``trajectory.name``; controller : one of :data:`CONTROLLERS`
+    duration_s : trajectory time flown before landing [s]
+    vicon_hz : virtual Vicon rate [Hz]
+    overrides : further configuration overrides (dotted paths), e.g. faults
+    settle_s : tracking time skipped by the tracking metrics [s]
+    expect_track : False if the thesis expects this flight not to reach tracking
+    """
+
+    name: str
+    group: str
+    title: str
+    thesis: str
+    trajectory: str
+    controller: str
+    duration_s: float
+    vicon_hz: float = 10.0
+    overrides: Mapping[str, Any] = field(default_factory=dict)
+    settle_s: float = 2.0
+    expect_track: bool = True
+
+    @property
+    def is_step(self) -> bool:
+        """True for the step trajectories (step metrics apply)."""
+        return self.trajectory.startswith("step-")
+
+
+def _suite() -> tuple[Scenario, ...]:
+    out = [Scenario(f"hover-{hz}hz", "hover-rates", f"Hover at (0, 0, -1) m, Vicon {hz} Hz",
+                    "Fig. 11.1-11.3", "hover", "lqr-cp", 20.0, vicon_hz=float(hz))
+           for hz in (1, 10, 100)]
+    out += [Scenario(f"step-{axis}", "steps", f"{step} step on {axis}", "Fig. 11.4",
+                     f"step-{axis}", "lqr-cv", 12.0)
+            for axis, step in (("x", "0.5 m north"), ("y", "0.5 m east"), ("z", "0.5 m up"))]
+    out += [Scenario(f"square-{c}", "square", f"0.75 m square, 20 s per lap, 6 laps, {c}",
+                     "Fig. 11.5-11.6", "square", c, 120.0)
+            for c in ("pid", "lqr-cp", "lqr-cv")]
+    out += [Scenario(f"yz-rectangle-{c}", "yz-rectangle", f"y-z rectangle, 3 laps, {c}",
+                     "Fig. 11.7", "yz-rectangle", c, 60.0)
+            for c in ("pid", "lqr-cp", "lqr-cv")]
+    out.append(Scenario("low-hover", "low-hover", "Hover 2 cm above the floor", "Fig. 11.8",
+                        "low-hover", "lqr-cv", 15.0))
+    out.append(Scenario("square-vicon-outage", "outage", "Square with a 1 s Vicon outage",
+                        "Ch. 7 (fault handling)", "square", "lqr-cv", 40.0,
+                        overrides={"sim.vicon.outages": [[OUTAGE_START_S, 1.0]]}))
+    out += [Scenario(f"{traj}-thrust-error", "thrust-error",
+                     f"{traj.capitalize()} with 10 % less lift than the model",
+                     "Ch. 5.2 (battery)", traj, "lqr-cv", dur,
+                     overrides={"sim.thrust_scale": 0.9})
+            for traj, dur in (("hover", 20.0), ("square", 40.0))]
+    out += [Scenario("hinf-thesis-model", "hinf", "H-infinity designed on the thesis's model",
+                     "Ch. 10.3", "hover", "hinf-thesis", 20.0, expect_track=False),
+            Scenario("hinf-rate-loop-model", "hinf",
+                     "H-infinity designed with the rate-loop lag", "Ch. 10.3", "hover",
+                     "hinf-rate-loop", 20.0)]
+    return tuple(out)
+
+
+SUITE: tuple[Scenario, ...] = _suite()
+"""The whole suite, in report order."""
+
+
+def select(names: Sequence[str] | None = None) -> tuple[Scenario, ...]:
+    """The scenarios named (all if None), in suite order; ConfigError for an unknown name."""
+    if names is None:
+        return SUITE
+    known = {s.name for s in SUITE}
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ConfigError(f"unknown scenario(s) {', '.join(unknown)}; known: "
+                          f"{', '.join(sorted(known))}")
+    return tuple(s for s in SUITE if s.name in names)
+
+
+def _low_rate(config: GroundStationConfig, hz: float) -> dict[str, Any]:
+    """Overrides that let the supervisor fly on a Vicon rate below its preflight minimum:
+    the rate check at half the rate, HOLD only after 1.5 missed samples."""
+    return {"vicon.min_rate_hz": 0.5 * hz, "vicon.expected_rate_hz": hz,
+            "safety.vicon_loss_hold_s": max(config.safety.vicon_loss_hold_s, 1.5 / hz),
+            "safety.vicon_loss_land_s": max(config.safety.vicon_loss_land_s, 3.0 / hz)}
+
+
+def scenario_config(scenario: Scenario, base: GroundStationConfig) -> GroundStationConfig:
+    """``base`` with the scenario's trajectory, controller, Vicon rate and overrides.
+
+    ConfigError if ``base`` has no ``sim`` section (the suite flies the virtual lab).
+    """
+    if base.sim is None:
+        raise ConfigError("the evaluation flies the virtual lab: the configuration needs a "
+                          "`sim:` section (config/sim.yaml)")
+    ov: dict[str, Any] = {"trajectory.name": scenario.trajectory,
+                          "sim.vicon.rate_hz": scenario.vicon_hz}
+    if scenario.controller.startswith("hinf"):
+        lag = scenario.controller == "hinf-rate-loop"
+        ov.update({"controller.type": "hinf", "controller.hinf.include_rate_loop": lag,
+                   "controller.hinf.gain_file": str(default_gain_path(lag))})
+    else:
+        ov["controller.type"] = scenario.controller
+    if scenario.vicon_hz < base.vicon.min_rate_hz:
+        ov.update(_low_rate(base, scenario.vicon_hz))
+    ov.update(scenario.overrides)
+    return apply_overrides(base, ov)
+
+
+def scenario_trajectory(scenario: Scenario, config: GroundStationConfig) -> Trajectory:
+    """The scenario's trajectory (steps at :data:`STEP_TIME_S`)."""
+    extra = {"step_time_s": STEP_TIME_S} if scenario.is_step else {}
+    return trajectory_from_config(config.trajectory, **extra)
+
+
+def scenario_controller(config: GroundStationConfig) -> Controller | None:
+    """An H-infinity controller from the configured gain file, else None (the flight
+    core builds the configured controller itself)."""
+    c = config.controller
+    if c.type != "hinf" or c.hinf.gain_file is None:
+        return None
+    return HinfController(load_hinf_gain(c.hinf.gain_file), params=quadrotor_params(config))
+
+
+def step_of(trajectory: Trajectory) -> tuple[float, FloatArray, FloatArray]:
+    """``(t_step [s], initial (3,), final (3,))`` of a step trajectory, from the trajectory."""
+    t_step = trajectory.duration
+    return (t_step, trajectory.sample(0.0).position,
+            trajectory.sample(t_step + 1.0).position)
