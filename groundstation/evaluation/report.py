@@ -49,7 +49,7 @@ Definitions. Errors are Euclidean distances between the position and the referen
 (the end of the take-off); "position" is the virtual lab's ground truth unless a
 row says otherwise. Lag: delay of the position behind the reference that maximises
 their cross-correlation, over the axes on which the reference moves, refined below
-one tick by a parabola through the peak (steps included; blank for a hover).
+one tick by a parabola through the peak (blank for hover and steps).
 Overshoot and settling time: step flights, on the stepped axis, settling to within
 {100 * SETTLING_BAND:g} % of the step. Est.: estimate against truth over the same window.
 HOLD: time spent holding on the IMU estimate. Max tilt: while airborne, from truth.

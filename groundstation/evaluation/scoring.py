@@ -5,8 +5,9 @@
 
 * tracking (RMS, per-axis RMS, maximum, lag) over the supervisor's TRACK
   phase after the first ``settle_s`` of trajectory time, from the truth (or,
-  for a real flight, from the estimate: ``truth`` says which); the lag is
-  measured on the trajectory's own clock, so a HOLD does not count as delay;
+  for a real flight, from the estimate: ``truth`` says which); the lag (not
+  for steps) is measured on the trajectory's own clock, so a HOLD does not
+  count as delay;
 * the estimator error, truth against estimate, over the same window;
 * for a step: overshoot, 2 % settling time, rise time and steady-state error of
   the stepped axis, on the trajectory's clock;
@@ -91,7 +92,9 @@ def flight_metrics(record: FlightRecord, *, settle_s: float = 2.0,
     }
     pos, ref = record.position[window], record.ref_pos[window]
     out.update(tracking_errors(pos, ref))
-    out["lag_s"] = lag_s(clock[window], pos, ref) if window.sum() > 3 else math.nan
+    # a step is judged by its step figures; a lag needs a reference that keeps moving
+    moving = step is None and window.sum() > 3
+    out["lag_s"] = lag_s(clock[window], pos, ref) if moving else math.nan
     est = (tracking_errors(record.est_pos[window], pos) if record.has_truth
            else tracking_errors(pos[:0], pos[:0]))
     out["est_rms_m"], out["est_max_m"] = est["rms_m"], est["max_m"]
