@@ -21,7 +21,7 @@ from groundstation.control.hinf import HinfController
 from groundstation.evaluation.metrics import error_norms
 from groundstation.evaluation.record import TIMING_REAL_TIME, TRUTH_LAB
 from groundstation.evaluation.report import report_flight
-from groundstation.evaluation.runner import _daemon, run_in_process, run_real_time
+from groundstation.evaluation.runner import build_daemon, run_in_process, run_real_time
 from groundstation.evaluation.scenarios import STEP_TIME_S, Scenario, scenario_config, select
 from groundstation.evaluation.scoring import flight_metrics
 from groundstation.loop.supervisor import State
@@ -65,11 +65,11 @@ def test_daemon_flies_the_scenarios_controller_and_trajectory(tmp_path: Path) ->
     base = apply_overrides(load_config(REPO / "config" / "sim.yaml"),
                            {"logging.flight_log_dir": str(tmp_path)})
     hinf = select(["hinf-rate-loop-model"])[0]
-    daemon = _daemon(hinf, scenario_config(hinf, base))
+    daemon = build_daemon(hinf, scenario_config(hinf, base))
     assert isinstance(daemon.core.controller, HinfController)
     assert daemon.core.controller.gain.include_rate_loop
     step = select(["step-z"])[0]
-    daemon = _daemon(step, scenario_config(step, base))
+    daemon = build_daemon(step, scenario_config(step, base))
     ref = [daemon.core.trajectory.sample(t).position[2] for t in (STEP_TIME_S - 0.01,
                                                                    STEP_TIME_S)]
     assert ref == pytest.approx([-1.0, -1.5])

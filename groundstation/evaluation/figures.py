@@ -48,6 +48,16 @@ def hover_rates(records: Records, out: Path) -> list[Path]:
     """Fig. 11.1 (x over time), 11.2 (top view) and 11.3 (1 Hz: estimate vs Vicon)."""
     if not _have(records, RATES):
         return []
+    return [_hover_x(records, out / "fig11_1_hover_x.png"),
+            _hover_top(records, out / "fig11_2_hover_top.png"),
+            _estimate_vs_vicon(records["hover-1hz"], out / "fig11_3_hover_1hz.png")]
+
+
+def _rate_label(name: str) -> str:
+    return f"Vicon {name.split('-')[1][:-2]} Hz"
+
+
+def _hover_x(records: Records, path: Path) -> Path:
     plt = pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(9, 7.5), sharex=True, sharey=True)
     for ax, name in zip(axes, RATES, strict=True):
@@ -57,24 +67,26 @@ def hover_rates(records: Records, out: Path) -> list[Path]:
         ax.plot(t, 100 * r.position[tr, 0], color="C0", label="truth", **TRUTH_STYLE)
         ax.plot(t, 100 * r.est_pos[tr, 0], color="C1", label="estimate", **EST_STYLE)
         ax.plot(t, 100 * r.ref_pos[tr, 0], **REF_STYLE)
-        ax.set(ylabel="x [cm]", title=f"Vicon {name.split('-')[1][:-2]} Hz")
+        ax.set(ylabel="x [cm]", title=_rate_label(name))
         ax.grid(True, alpha=0.3)
     axes[0].legend(fontsize=8, loc="upper right")
     axes[-1].set_xlabel("time since tracking started [s]")
     fig.suptitle("Hover at (0, 0, -1) m, constant-position LQR (cf. thesis Fig. 11.1)")
-    paths = [save(fig, out / "fig11_1_hover_x.png")]
+    return save(fig, path)
+
+
+def _hover_top(records: Records, path: Path) -> Path:
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.5, 6.5))
     for k, name in enumerate(RATES):
         r = records[name]
         tr = _tracking(r)
         ax.plot(100 * r.position[tr, 1], 100 * r.position[tr, 0], color=f"C{k}", lw=0.9,
-                label=f"Vicon {name.split('-')[1][:-2]} Hz")
+                label=_rate_label(name))
     ax.plot([0], [0], "k+", ms=14, label="reference")
     top_view(ax, "Hover seen from the ceiling (cf. thesis Fig. 11.2)", "cm")
     ax.legend(fontsize=8)
-    paths.append(save(fig, out / "fig11_2_hover_top.png"))
-    paths.append(_estimate_vs_vicon(records["hover-1hz"], out / "fig11_3_hover_1hz.png"))
-    return paths
+    return save(fig, path)
 
 
 def _estimate_vs_vicon(r: FlightRecord, path: Path) -> Path:

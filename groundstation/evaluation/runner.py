@@ -123,7 +123,7 @@ def _sim_device(config_file: Path, log_file: Path) -> Iterator[str]:
             proc.stdout.close()
 
 
-def _daemon(scenario: Scenario, cfg: GroundStationConfig) -> FlightDaemon:
+def build_daemon(scenario: Scenario, cfg: GroundStationConfig) -> FlightDaemon:
     """A daemon flying the scenario's controller and trajectory.
 
     FlightDaemon takes neither a controller nor a trajectory, so its core is
@@ -157,7 +157,7 @@ def run_real_time(scenario: Scenario, base: GroundStationConfig, workdir: Path) 
     config_file.write_text(dump_config(cfg), encoding="utf-8")
     with _sim_device(config_file, d / "sim-device.log") as pty_path:
         cfg = apply_overrides(cfg, {"serial.port": pty_path})
-        summary = _daemon(scenario, cfg).run()
+        summary = build_daemon(scenario, cfg).run()
         time.sleep(0.2)  # the lab records the final COMMAND (mask 0) before it stops
     return record_from_log(summary.log_dir, truth)
 

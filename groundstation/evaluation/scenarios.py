@@ -125,8 +125,10 @@ def select(names: Sequence[str] | None = None) -> tuple[Scenario, ...]:
 
 def _low_rate(config: GroundStationConfig, hz: float) -> dict[str, Any]:
     """Overrides that let the supervisor fly on a Vicon rate below its preflight minimum:
-    the rate check at half the rate, HOLD only after 1.5 missed samples."""
-    return {"vicon.min_rate_hz": 0.5 * hz, "vicon.expected_rate_hz": hz,
+    the rate check at half the rate, HOLD only after 1.5 missed samples. The expected
+    rate is doubled because the pose filter counts poses in a 1 s window, which holds
+    one or two samples of a 1 Hz stream (the warning band ends at 1.2 x expected)."""
+    return {"vicon.min_rate_hz": 0.5 * hz, "vicon.expected_rate_hz": 2.0 * hz,
             "safety.vicon_loss_hold_s": max(config.safety.vicon_loss_hold_s, 1.5 / hz),
             "safety.vicon_loss_land_s": max(config.safety.vicon_loss_land_s, 3.0 / hz)}
 
