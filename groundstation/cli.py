@@ -156,6 +156,54 @@ def replay(
         typer.echo(line)
 
 
+@app.command("eval")
+def evaluate(
+    config: ConfigOption,
+    fast: Annotated[bool, typer.Option(
+        help="In-process on the simulated clock (default: real time over the pty and UDP).")]
+        = False,
+    out: Annotated[Path, typer.Option(help="Report directory.")] = Path("eval_out"),
+    scenario: Annotated[list[str] | None, typer.Option(
+        help="Fly only these scenarios (repeatable; default all).")] = None,
+) -> None:
+    """Fly the thesis's Ch. 11 flight tests in the virtual lab and write a report.
+
+    Metrics come from the virtual lab's ground truth; the report is ``report.md`` with
+    PNG figures mirroring Fig. 11.1-11.8 and ``metrics.json``.
+    """
+    from groundstation.evaluation import run_eval
+
+    cfg = load(config)
+    try:
+        report = run_eval(cfg, fast=fast, out_dir=out, scenarios=scenario, progress=typer.echo)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 2 if isinstance(exc, ConfigError) else 1) from exc
+    typer.echo(f"{len(report.outcomes)} scenarios in {report.wall_s:.0f} s: {report.report_md}, "
+               f"{report.metrics_json}, {len(report.figures)} figures")
+
+
+@app.command()
+def report(
+    log: Annotated[Path, typer.Argument(help="Flight-log directory.")],
+    truth: Annotated[Path | None, typer.Option(
+        help="The virtual lab's truth file (.npz) of the same run.")] = None,
+    out: Annotated[Path | None, typer.Option(help="Output directory (default LOG/report).")]
+        = None,
+) -> None:
+    """Metrics and figures for one recorded flight, real or simulated.
+
+    Without ``--truth`` the metrics are computed from the estimate and labelled so.
+    """
+    from groundstation.evaluation import report_flight
+
+    try:
+        result = report_flight(log, truth, out)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 1) from exc
+    typer.echo(f"{result.report_md}, {result.metrics_json}"
+               + (f", {result.figure}" if result.figure else ""))
+
+
 @app.command()
 def monitor(
     endpoint: Annotated[str, typer.Option(help="Telemetry endpoint to subscribe to.")] =
