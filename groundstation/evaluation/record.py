@@ -3,7 +3,7 @@
 A :class:`FlightRecord` is what the metrics and figures read. It is built
 
 * from an in-process flight (:func:`record_from_trace`): the flight core's own
-  trace, with ground truth from the virtual lab's plant at every tick;
+  trace, with the virtual lab's truth log interpolated at every tick's time;
 * from a flight log (:func:`record_from_log`), optionally with the virtual
   lab's truth file: the truth is interpolated at the log's tick times on the
   monotonic clock (``truth.t + truth.start_monotonic``, written by
@@ -110,10 +110,15 @@ def record_from_trace(result: FlightResult, compute_s: FloatArray,
     """
     tr = result.trace
     v = np.asarray(vicon, dtype=float).reshape(-1, 4)
+    # The trace's own true_pos is the plant's state after the whole DATA period was
+    # simulated (about 9 ms after the tick's time); the lab's truth log interpolated at
+    # the tick time is the truth the estimate is compared with, as for a logged flight.
+    log = result.lab.truth_log.arrays()
+    true_pos, true_q = align_truth(tr["t"], log["t"], log["position"], log["quaternion"])
     return FlightRecord(
         t=tr["t"], state=tr["state"].astype(np.int64), ref_pos=tr["ref_pos"],
-        est_pos=tr["est_pos"], est_q=tr["est_q"], true_pos=tr["true_pos"],
-        true_q=tr["true_q"], vicon_t=v[:, 0], vicon_pos=v[:, 1:4],
+        est_pos=tr["est_pos"], est_q=tr["est_q"], true_pos=true_pos,
+        true_q=true_q, vicon_t=v[:, 0], vicon_pos=v[:, 1:4],
         compute_s=np.asarray(compute_s, dtype=float), jitter_s=None, latency_s=None,
         transitions=tuple(result.transitions), timing_source=TIMING_FAST,
         truth_source=TRUTH_LAB,
@@ -126,9 +131,9 @@ def _transitions_from_states(t: FloatArray, state: IntArray) -> tuple[Transition
                  for i in change)
 
 
-def load_truth(path: str | Path) -> dict[str, FloatArray]:
-    """Read a virtual-lab truth file: ``t_monotonic`` (N,) [s], ``position`` (N, 3),
-    ``quaternion`` (N, 4). RecorderError if unreadable or without ``start_monotonic``."""
+def load_truth(path: str | Path) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Read a virtual-lab truth file: monotonic times (N,) [s], positions (N, 3) NED [m],
+    attitudes (N, 4). RecorderError if unreadable or without ``start_monotonic``."""
     try:
         with np.load(Path(path), allow_pickle=False) as data:
             arrays = {k: np.array(data[k], dtype=float) for k in ("t", "position", "quaternion")}
@@ -138,25 +143,26 @@ def load_truth(path: str | Path) -> dict[str, FloatArray]:
     if start is None:
         raise RecorderError(f"{path}: truth file has no start_monotonic (written by an older "
                             "sim_device); it cannot be aligned with a flight log")
-    return {"t_monotonic": arrays["t"] + start, "position": arrays["position"],
-            "quaternion": arrays["quaternion"]}
+    return arrays["t"] + start, arrays["position"], arrays["quaternion"]
 
 
-def align_truth(t: FloatArray, truth: dict[str, FloatArray]) -> tuple[FloatArray, FloatArray]:
-    """Truth position (N, 3) and attitude (N, 4) at monotonic times ``t`` (N,).
+def align_truth(t: FloatArray, truth_t: FloatArray, position: FloatArray,
+                quaternion: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Truth position (N, 3) and attitude (N, 4) at the flight's tick times ``t`` (N,).
 
-    Linear interpolation (the truth is logged every plant step, 2 ms); the
-    interpolated quaternions are renormalised. RecorderError if the truth does
-    not cover the flight's ticks.
+    truth_t (M,) : the truth's times on the same clock [s]; position (M, 3);
+    quaternion (M, 4). Linear interpolation (the lab logs its truth every 10 ms;
+    the interpolated quaternions are renormalised). RecorderError if the truth
+    does not cover the ticks.
     """
-    tt = truth["t_monotonic"]
+    tt = np.asarray(truth_t, dtype=float)
     if len(tt) < 2 or t[0] < tt[0] - 0.05 or t[-1] > tt[-1] + 0.05:
         raise RecorderError(
-            f"the truth file covers {tt[0] if len(tt) else math.nan:.3f}.."
-            f"{tt[-1] if len(tt) else math.nan:.3f} s (monotonic), the flight log "
-            f"{t[0]:.3f}..{t[-1]:.3f} s: they are not from the same run")
-    pos = np.column_stack([np.interp(t, tt, truth["position"][:, k]) for k in range(3)])
-    q = np.column_stack([np.interp(t, tt, truth["quaternion"][:, k]) for k in range(4)])
+            f"the truth covers {tt[0] if len(tt) else math.nan:.3f}.."
+            f"{tt[-1] if len(tt) else math.nan:.3f} s, the flight "
+            f"{t[0]:.3f}..{t[-1]:.3f} s (monotonic for a log): they are not from the same run")
+    pos = np.column_stack([np.interp(t, tt, position[:, k]) for k in range(3)])
+    q = np.column_stack([np.interp(t, tt, quaternion[:, k]) for k in range(4)])
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     return pos, q
 
@@ -174,7 +180,7 @@ def record_from_log(log: str | Path, truth_file: str | Path | None = None) -> Fl
     state = rows["state"].astype(np.int64)
     true_pos = true_q = None
     if truth_file is not None:
-        true_pos, true_q = align_truth(t, load_truth(truth_file))
+        true_pos, true_q = align_truth(t, *load_truth(truth_file))
     valid = rows["vicon_valid"].astype(bool)
     return FlightRecord(
         t=t, state=state, ref_pos=np.array(rows["ref_position"], dtype=float),

@@ -75,6 +75,17 @@ def transitions_json(transitions: Sequence[Transition], t0: float) -> list[list[
     return [[round(tr.t - t0, 3), tr.old.name, tr.new.name, tr.reason] for tr in transitions]
 
 
+NOMINAL_REASONS = ("preflight checks passed", "take-off height reached", "trajectory complete",
+                   "on the floor", "landed and disarmed: vehicle handed back", "")
+
+
+def states_line(transitions: Sequence[Transition]) -> str:
+    """``TAKEOFF -> HOLD (Vicon lost ...) -> ...``: the states, with the reason of every
+    transition that is not part of a nominal flight."""
+    return " -> ".join(tr.new.name + ("" if tr.reason in NOMINAL_REASONS else f" ({tr.reason})")
+                       for tr in transitions)
+
+
 def write_json(path: Path, data: Mapping[str, Any]) -> Path:
     """Write ``data`` as indented JSON (NaN -> null)."""
     path.write_text(json.dumps(jsonable(data), indent=2) + "\n", encoding="utf-8")
@@ -159,7 +170,7 @@ def report_flight(log: str | Path, truth: str | Path | None = None,
     lines = [f"# Flight report: {Path(log).name}", "",
              f"- position judged from: **{record.truth_source}**",
              f"- timing: {record.timing_source}",
-             f"- states: {' -> '.join(tr.new.name for tr in record.transitions)}", "",
+             f"- states: {states_line(record.transitions)}", "",
              table, DEFINITIONS]
     if figure is not None:
         lines += ["", f"![flight]({figure.name})", ""]

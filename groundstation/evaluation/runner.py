@@ -96,13 +96,19 @@ def free_udp_port() -> int:
 
 
 @contextmanager
-def _sim_device(config_file: Path, log_file: Path) -> Iterator[str]:
+def _sim_device(config_file: Path, log_file: Path, limit_s: float) -> Iterator[str]:
     """Run ``gs sim-device`` in a child process; yield its pty path; stop it (SIGINT, which
-    writes the truth file) on the way out."""
+    writes the truth file) on the way out.
+
+    The child runs in its own session, so a Ctrl-C at the terminal reaches only the
+    daemon (which then lands) and not the lab it is flying in; ``limit_s`` [s] bounds
+    the child's run should this process die without stopping it.
+    """
     cmd = [sys.executable, "-c", "from groundstation.cli import app; app()",
-           "sim-device", "--config", str(config_file)]
+           "sim-device", "--config", str(config_file), "--duration", f"{limit_s:g}"]
     with log_file.open("w") as err:
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True)
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True,
+                                start_new_session=True)
     try:
         assert proc.stdout is not None
         ready, _, _ = select.select([proc.stdout], [], [], SIM_START_TIMEOUT_S)
@@ -155,7 +161,8 @@ def run_real_time(scenario: Scenario, base: GroundStationConfig, workdir: Path) 
         "logging.flight_log_dir": str(d), "sim.truth_file": str(truth)})
     config_file = d / "config.yaml"
     config_file.write_text(dump_config(cfg), encoding="utf-8")
-    with _sim_device(config_file, d / "sim-device.log") as pty_path:
+    limit = scenario.duration_s + 3 * MARGIN_S
+    with _sim_device(config_file, d / "sim-device.log", limit) as pty_path:
         cfg = apply_overrides(cfg, {"serial.port": pty_path})
         summary = build_daemon(scenario, cfg).run()
         time.sleep(0.2)  # the lab records the final COMMAND (mask 0) before it stops

@@ -23,6 +23,7 @@ from groundstation.evaluation.record import TIMING_FAST, TIMING_REAL_TIME, Fligh
 from groundstation.evaluation.report import (
     DEFINITIONS,
     metrics_table,
+    states_line,
     transitions_json,
     write_json,
 )
@@ -176,8 +177,7 @@ def _markdown(outcomes: dict[str, ScenarioOutcome], config: GroundStationConfig,
         "", "## Metrics", "", table, DEFINITIONS, "## Flights", "",
     ]
     lines += [f"- `{n}`: {o.scenario.title} ({o.scenario.thesis}); states "
-              f"{' -> '.join(tr.new.name for tr in o.record.transitions)}"
-              for n, o in outcomes.items()]
+              f"{states_line(o.record.transitions)}" for n, o in outcomes.items()]
     if pngs:
         lines += ["", "## Figures", ""]
         for p in pngs:
