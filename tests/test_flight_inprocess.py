@@ -173,3 +173,9 @@ def test_hinf_from_config_flies_only_when_designed_with_the_rate_loop() -> None:
                             duration_s=6.0, max_time_s=60.0)
     land = next(tr for tr in thesis.transitions if tr.new is State.LAND)
     assert "tilt" in land.reason
+
+
+def test_trace_truth_is_stamped_with_its_own_time() -> None:
+    result = fly_in_process(sim_config(), duration_s=2.0, max_time_s=40.0)
+    lead = result.trace["true_t"] - result.trace["t"]
+    assert lead.min() >= -1e-9 and lead.max() <= 0.0101  # at most one DATA period newer

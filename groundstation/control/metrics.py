@@ -20,33 +20,40 @@ def rms_error(flown: FloatArray, reference: FloatArray) -> float:
 
 
 def time_lag(flown: FloatArray, reference: FloatArray, dt: float, max_lag_s: float = 5.0) -> float:
-    """Delay [s] of ``flown`` behind ``reference`` by cross-correlation.
+    """Delay [s] of (N,) or (N, d) ``flown`` behind ``reference``, both sampled every ``dt``.
 
-    flown, reference : (N,) or (N, d) histories sampled every ``dt`` [s]; the
-    channels are mean-removed and their correlations summed, so the x and y of
-    a square give one lag. The lag maximising the normalised cross-correlation
-    ``c(l) = mean_i ref[i] . flown[i + l]`` over ``|l| <= max_lag_s`` is refined
-    to below one sample by a parabola through the peak and its neighbours.
-    Positive: the vehicle is behind the reference.
+    For each lag ``l`` (|l| <= ``max_lag_s``, at most a quarter of the window) the
+    reference's central samples ``a = reference[L:N-L]`` are compared with the
+    flown samples ``l`` later, ``b = flown[L+l:N-L+l]``, by the correlation
+    coefficient ``sum(a.b) / (|a| |b|)`` (means removed per channel, channels
+    summed, so the x and y of a square give one lag). The reference window is the
+    same for every lag, so by Cauchy-Schwarz a pure delay
+    ``flown(t) = reference(t - d)`` peaks at exactly ``l = d``; the
+    overlap-normalised estimator ``sum over the overlap / (N - |l|)`` is biased by
+    the window's edges (35 ms for a 10 s sine over 60 s). The peak is refined by a
+    parabola through it and its neighbours. Positive: the vehicle is behind.
     """
     a = np.asarray(reference, dtype=float).reshape(len(reference), -1)
     b = np.asarray(flown, dtype=float).reshape(len(flown), -1)
-    if a.shape != b.shape or len(a) < 3:
-        raise ControlError(f"histories must have the same shape (N >= 3), found {a.shape}, "
+    if a.shape != b.shape or len(a) < 5:
+        raise ControlError(f"histories must have the same shape (N >= 5), found {a.shape}, "
                            f"{b.shape}")
-    a = a - a.mean(axis=0)
-    b = b - b.mean(axis=0)
     n = len(a)
-    max_l = min(round(max_lag_s / dt), n // 2)
-    lags = range(-max_l, max_l + 1)
-    c = np.array([np.sum(a[max(0, -lag): n - max(0, lag)] * b[max(0, lag): n - max(0, -lag)])
-                  / (n - abs(lag)) for lag in lags])
+    big_l = min(round(max_lag_s / dt), (n - 1) // 4)
+    core = a[big_l:n - big_l] - a[big_l:n - big_l].mean(axis=0)
+    norm_a = float(np.linalg.norm(core))
+    c = np.zeros(2 * big_l + 1)
+    for k, lag in enumerate(range(-big_l, big_l + 1)):
+        seg = b[big_l + lag:n - big_l + lag]
+        seg = seg - seg.mean(axis=0)
+        denom = norm_a * float(np.linalg.norm(seg))
+        c[k] = float(np.sum(core * seg)) / denom if denom > 0.0 else 0.0
     k = int(np.argmax(c))
     frac = 0.0
     if 0 < k < len(c) - 1:
-        denom = c[k - 1] - 2.0 * c[k] + c[k + 1]
-        frac = 0.5 * (c[k - 1] - c[k + 1]) / denom if denom != 0.0 else 0.0
-    return float((k - max_l + frac) * dt)
+        curv = c[k - 1] - 2.0 * c[k] + c[k + 1]
+        frac = 0.5 * (c[k - 1] - c[k + 1]) / curv if curv != 0.0 else 0.0
+    return float((k - big_l + frac) * dt)
 
 
 @dataclass(frozen=True, slots=True)

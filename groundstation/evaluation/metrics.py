@@ -5,8 +5,9 @@ flight was flown. Positions are NED [m], times [s], quaternions scalar-first.
 
 * tracking error: RMS and maximum Euclidean distance between two paths;
 * time lag: the delay of the flown path behind the reference that maximises
-  their normalised cross-correlation (:func:`xcorr_lag`), refined to below one
-  sample by a parabola through the peak, after resampling onto a uniform grid,
+  their normalised cross-correlation (:func:`groundstation.control.metrics.time_lag`),
+  refined to below one sample by a parabola through the peak, after resampling onto a
+  uniform grid,
   over the axes on which the reference moves;
 * step figures: overshoot and the 2 % settling time
   (:func:`groundstation.control.metrics.step_metrics` with ``band = 0.02``);
@@ -21,7 +22,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from groundstation.control.metrics import StepMetrics, step_metrics
+from groundstation.control.metrics import StepMetrics, step_metrics, time_lag
 from groundstation.types import FloatArray
 
 SETTLING_BAND = 0.02
@@ -73,39 +74,6 @@ def moving_axes(reference: FloatArray, threshold_m: float = MOVING_STD_M) -> lis
     return [k for k in range(std.shape[0]) if std[k] > threshold_m]
 
 
-def xcorr_lag(flown: FloatArray, reference: FloatArray, dt: float, max_lag_s: float) -> float:
-    """Delay [s] of (N, d) ``flown`` behind ``reference``, both sampled every ``dt`` [s].
-
-    For each lag ``l`` (|l| <= ``max_lag_s``, at most a quarter of the window) the
-    reference's central samples ``a = reference[L:N-L]`` are compared with the
-    flown samples ``l`` later, ``b = flown[L+l:N-L+l]``, by the correlation
-    coefficient ``sum(a.b) / (|a| |b|)`` (means removed per channel, channels
-    summed). The reference window is the same for every lag, so by
-    Cauchy-Schwarz a pure delay ``flown(t) = reference(t - d)`` peaks at exactly
-    ``l = d`` (the overlap-normalised estimator ``sum over the overlap / (N - |l|)``
-    is biased by the window's edges: 35 ms for a 10 s sine over 60 s). The peak
-    is refined by a parabola through it and its neighbours. Positive: behind.
-    """
-    a = np.asarray(reference, dtype=float).reshape(len(reference), -1)
-    b = np.asarray(flown, dtype=float).reshape(len(flown), -1)
-    n = len(a)
-    big_l = min(round(max_lag_s / dt), (n - 1) // 4)
-    core = a[big_l:n - big_l] - a[big_l:n - big_l].mean(axis=0)
-    norm_a = float(np.linalg.norm(core))
-    c = np.zeros(2 * big_l + 1)
-    for k, lag in enumerate(range(-big_l, big_l + 1)):
-        seg = b[big_l + lag:n - big_l + lag]
-        seg = seg - seg.mean(axis=0)
-        denom = norm_a * float(np.linalg.norm(seg))
-        c[k] = float(np.sum(core * seg)) / denom if denom > 0.0 else 0.0
-    k = int(np.argmax(c))
-    frac = 0.0
-    if 0 < k < len(c) - 1:
-        curv = c[k - 1] - 2.0 * c[k] + c[k + 1]
-        frac = 0.5 * (c[k - 1] - c[k + 1]) / curv if curv != 0.0 else 0.0
-    return float((k - big_l + frac) * dt)
-
-
 def lag_s(t: FloatArray, path: FloatArray, reference: FloatArray, *, dt: float = 0.01,
           max_lag_s: float = 3.0) -> float:
     """Delay [s] of ``path`` behind ``reference`` (N, 3) sampled at times ``t`` (N,).
@@ -120,7 +88,7 @@ def lag_s(t: FloatArray, path: FloatArray, reference: FloatArray, *, dt: float =
         return math.nan
     _, ref = resample(t, np.asarray(reference)[:, axes], dt)
     _, flown = resample(t, np.asarray(path)[:, axes], dt)
-    return xcorr_lag(flown, ref, dt, max_lag_s)
+    return time_lag(flown, ref, dt, max_lag_s)
 
 
 def step_figures(t: FloatArray, y: FloatArray, *, t_step: float, initial: float,

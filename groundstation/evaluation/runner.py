@@ -34,12 +34,11 @@ import numpy as np
 
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config
 from groundstation.control.simulate import SimPlant, SimResult, simulate
-from groundstation.errors import ConfigError, GroundStationError
+from groundstation.errors import GroundStationError
 from groundstation.evaluation.record import FlightRecord, record_from_log, record_from_trace
 from groundstation.evaluation.scenarios import (
     Scenario,
     scenario_config,
-    scenario_controller,
     scenario_trajectory,
 )
 from groundstation.loop.assemble import controller_from_config
@@ -79,7 +78,7 @@ class _TickProbe:
 def run_in_process(scenario: Scenario, base: GroundStationConfig) -> FlightRecord:
     """Fly ``scenario`` in-process against the virtual lab (deterministic for a seed)."""
     cfg = scenario_config(scenario, base)
-    flight = InProcessFlight(cfg, controller=scenario_controller(cfg),
+    flight = InProcessFlight(cfg,
                              trajectory=scenario_trajectory(scenario, cfg),
                              duration_s=scenario.duration_s)
     probe = _TickProbe(flight.core)
@@ -130,23 +129,9 @@ def _sim_device(config_file: Path, log_file: Path, limit_s: float) -> Iterator[s
 
 
 def build_daemon(scenario: Scenario, cfg: GroundStationConfig) -> FlightDaemon:
-    """A daemon flying the scenario's controller and trajectory.
-
-    FlightDaemon takes neither a controller nor a trajectory, so its core is
-    replaced before the flight by one built exactly as the in-process runner's.
-    Until the controller factory builds 'hinf' the daemon is constructed with
-    the default controller first (its core is replaced anyway).
-    """
-    try:
-        controller_from_config(cfg)
-        daemon = FlightDaemon(cfg, duration_s=scenario.duration_s)
-    except ConfigError:
-        daemon = FlightDaemon(apply_overrides(cfg, {"controller.type": "lqr-cv"}),
-                              duration_s=scenario.duration_s)
-    daemon.core = FlightCore(cfg, controller=scenario_controller(cfg),
-                             trajectory=scenario_trajectory(scenario, cfg),
-                             duration_s=scenario.duration_s)
-    return daemon
+    """A daemon flying the scenario's controller (from ``cfg``) and trajectory."""
+    return FlightDaemon(cfg, trajectory=scenario_trajectory(scenario, cfg),
+                        duration_s=scenario.duration_s)
 
 
 def run_real_time(scenario: Scenario, base: GroundStationConfig, workdir: Path) -> FlightRecord:
@@ -175,7 +160,7 @@ def simulate_model(scenario: Scenario, base: GroundStationConfig) -> SimResult:
     command delay and thrust error; starts on the trajectory, lasts ``duration_s``."""
     cfg = scenario_config(scenario, base)
     assert cfg.sim is not None  # scenario_config checked it
-    controller = scenario_controller(cfg) or controller_from_config(cfg)
+    controller = controller_from_config(cfg)
     plant = SimPlant(rate_tau=cfg.sim.rate_loop_tau_s, delay_s=cfg.sim.command_delay_s,
                      thrust_scale=cfg.sim.thrust_scale)
     return simulate(controller, scenario_trajectory(scenario, cfg), scenario.duration_s,

@@ -25,12 +25,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from groundstation.config import GroundStationConfig, apply_overrides
-from groundstation.control.base import Controller
-from groundstation.control.hinf import HinfController, default_gain_path, load_hinf_gain
+from groundstation.control.hinf import default_gain_path
 from groundstation.control.trajectories import trajectory_from_config
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import ConfigError
-from groundstation.loop.inputs import quadrotor_params
 from groundstation.types import FloatArray
 
 STEP_TIME_S = 3.0
@@ -159,15 +157,6 @@ def scenario_trajectory(scenario: Scenario, config: GroundStationConfig) -> Traj
     """The scenario's trajectory (steps at :data:`STEP_TIME_S`)."""
     extra = {"step_time_s": STEP_TIME_S} if scenario.is_step else {}
     return trajectory_from_config(config.trajectory, **extra)
-
-
-def scenario_controller(config: GroundStationConfig) -> Controller | None:
-    """An H-infinity controller from the configured gain file, else None (the flight
-    core builds the configured controller itself)."""
-    c = config.controller
-    if c.type != "hinf" or c.hinf.gain_file is None:
-        return None
-    return HinfController(load_hinf_gain(c.hinf.gain_file), params=quadrotor_params(config))
 
 
 def step_of(trajectory: Trajectory) -> tuple[float, FloatArray, FloatArray]:

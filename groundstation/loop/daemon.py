@@ -47,6 +47,8 @@ import structlog
 from groundstation.asctec.link import SerialLink
 from groundstation.asctec.messages import ConfigMsg
 from groundstation.config import GroundStationConfig, dump_config
+from groundstation.control.base import Controller
+from groundstation.control.trajectory import Trajectory
 from groundstation.loop.core import FlightCore, TickResult
 from groundstation.loop.inputs import DataFrontEnd
 from groundstation.loop.recorder import FlightRecorder
@@ -119,15 +121,18 @@ class FlightDaemon:
 
     config : validated configuration (``serial.port`` is the X-3D)
     duration_s : trajectory time before landing (default one trajectory period)
+    controller, trajectory : replace the ones the configuration names
     progress : called about once a second with a one-line status
     stop : an extra way to ask for a stop (counts like a signal), e.g. from a test
     """
 
     def __init__(self, config: GroundStationConfig, *, duration_s: float | None = None,
+                 controller: Controller | None = None, trajectory: Trajectory | None = None,
                  progress: Callable[[str], None] | None = None,
                  stop: threading.Event | None = None) -> None:
         self.config = config
-        self.core = FlightCore(config, duration_s=duration_s)
+        self.core = FlightCore(config, controller=controller, trajectory=trajectory,
+                               duration_s=duration_s)
         self._front = DataFrontEnd(config)
         self._progress = progress
         self._stop_event = stop

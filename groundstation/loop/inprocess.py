@@ -37,7 +37,7 @@ Event = Callable[["InProcessFlight"], None]
 """A scripted action at a simulated time: inject a fault in ``flight.lab``, move the
 pilot's switch, or ``flight.stop_requests += 1`` to simulate SIGINT/SIGTERM."""
 
-_COLUMNS = ("t", "state", "true_pos", "est_pos", "ref_pos", "ref_vel", "true_vel",
+_COLUMNS = ("t", "true_t", "state", "true_pos", "est_pos", "ref_pos", "ref_vel", "true_vel",
             "est_vel", "sticks", "mask", "true_q", "est_q")
 
 
@@ -45,7 +45,10 @@ _COLUMNS = ("t", "state", "true_pos", "est_pos", "ref_pos", "ref_vel", "true_vel
 class FlightTrace:
     """Per-tick arrays of one in-process flight (rows are control ticks).
 
-    t : (N,) time [s]; state : (N,) supervisor state (int);
+    t : (N,) tick time [s] (the DATA frame's delivery time); state : (N,) supervisor state;
+    true_t : (N,) time of the truth columns [s]: the lab is advanced a whole DATA period
+        before its frames are ticked, so the truth is up to one period newer than ``t``
+        (interpolate ``lab.truth_log`` for truth at the tick time exactly);
     true_pos, est_pos, ref_pos : (N, 3) NED [m]; ref_vel, true_vel : (N, 3) NED [m/s];
     est_vel : (N, 3) NED [m/s] (estimate rotated to earth axes);
     sticks : (N, 4) sent [roll, pitch, yaw, thrust] (0 when not commanding);
@@ -154,6 +157,7 @@ class InProcessFlight:
         est = r.estimate
         rows = self.trace.rows
         rows["t"].append(t)
+        rows["true_t"].append(truth.t)
         rows["state"].append(float(r.state))
         rows["true_pos"].append(truth.position.copy())
         rows["true_vel"].append(truth.velocity.copy())
