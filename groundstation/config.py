@@ -384,6 +384,9 @@ class SafetyConfig(_Model):
     volume_y: tuple[float, float] = (-1.5, 1.5)  # Table B.1
     volume_z: tuple[float, float] = (-2.0, 0.05)  # Table B.1 height 0..2 m, NED (z up is -)
     max_tilt_deg: PositiveFloat = 35.0  # beyond this Vicon tracking is unreliable; tuned
+    handback_tilt_deg: PositiveFloat = 60.0
+    # a landing that tilts this far has lost the attitude (the controller that tripped
+    # max_tilt_deg is still flying): hand back to the pilot at once
     vicon_loss_hold_s: PositiveFloat = 0.5  # hold on the IMU estimate after this (PX4 figure)
     vicon_loss_land_s: PositiveFloat = 2.0  # land if Vicon has not returned after this
     link_loss_s: PositiveFloat = 0.3  # no DATA this long = link lost
@@ -403,6 +406,8 @@ class SafetyConfig(_Model):
 
     @model_validator(mode="after")
     def _order(self) -> SafetyConfig:
+        if self.handback_tilt_deg <= self.max_tilt_deg:
+            raise ValueError("handback_tilt_deg must exceed max_tilt_deg")
         if self.vicon_loss_land_s < self.vicon_loss_hold_s:
             raise ValueError("vicon_loss_land_s must not be shorter than vicon_loss_hold_s")
         return self

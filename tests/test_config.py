@@ -72,6 +72,7 @@ def _error_for(data: dict[str, object]) -> ConfigError:
         ({"serial": {"sensors": ["status", "gyro"]}}, "serial.sensors", "'acc'"),
         ({"vehicle": {"mass_kg": 5.0}}, "vehicle", "could not hover"),
         ({"safety": {"volume_x": [1.0, -1.0]}}, "safety.volume_x", "min < max"),
+        ({"safety": {"handback_tilt_deg": 30.0}}, "safety", "exceed max_tilt_deg"),
         ({"controller": {"type": "hinf", "hinf": {"gain_file": "/nonexistent.npz"}}},
          "controller", "does not exist"),
         ({"sim": {"vicon": {"outages": [[1.0]]}}}, "sim.vicon.outages.0.1", "missing"),

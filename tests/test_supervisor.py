@@ -104,6 +104,15 @@ def test_geofence_and_tilt_land(change: dict[str, object]) -> None:
     assert sup.update(obs(t + 0.1, **{**FLYING_AT_1M, **change})) is State.LAND
 
 
+def test_a_landing_that_loses_the_attitude_is_handed_back() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.1, tilt_rad=math.radians(40), **FLYING_AT_1M)) is State.LAND
+    assert sup.update(obs(t + 0.2, tilt_rad=math.radians(50), **FLYING_AT_1M)) is State.LAND
+    assert sup.update(obs(t + 0.3, tilt_rad=math.radians(61), **FLYING_AT_1M)) is State.HANDBACK
+    assert "landing failed" in sup.transitions[-1].reason and not sup.success
+
+
 def test_estimator_divergence_hands_back_at_once() -> None:
     sup = Supervisor()
     t = airborne(sup)

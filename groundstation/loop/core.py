@@ -70,7 +70,8 @@ def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
     s = config.safety
     return SupervisorLimits(
         volume_x=s.volume_x, volume_y=s.volume_y, volume_z=s.volume_z,
-        max_tilt_rad=math.radians(s.max_tilt_deg), vicon_loss_hold_s=s.vicon_loss_hold_s,
+        max_tilt_rad=math.radians(s.max_tilt_deg),
+        handback_tilt_rad=math.radians(s.handback_tilt_deg), vicon_loss_hold_s=s.vicon_loss_hold_s,
         vicon_loss_land_s=s.vicon_loss_land_s, link_loss_s=s.link_loss_s,
         preflight_timeout_s=s.preflight_timeout_s,
         min_data_rate_hz=0.8 * 1000.0 / config.serial.data_period_ms,

@@ -15,6 +15,7 @@ States and transitions::
       HOLD and Vicon back                      -> the state HOLD interrupted
       HOLD and Vicon silent > vicon_loss_land_s -> LAND
       outside the volume or tilt > max         -> LAND
+      LAND and tilt > handback tilt            -> HANDBACK (the landing lost the attitude)
     any state:
       estimator diverged                       -> HANDBACK (mask 0 at once)
       no DATA for link_loss_s (after PREFLIGHT) -> LINK_LOST (log and stop)
@@ -68,6 +69,9 @@ class SupervisorLimits:
     volume_y: tuple[float, float] = (-1.5, 1.5)
     volume_z: tuple[float, float] = (-2.0, 0.05)
     max_tilt_rad: float = math.radians(35.0)
+    handback_tilt_rad: float = math.radians(60.0)
+    """Tilt at which a landing is abandoned to the pilot: the controller that is landing
+    has lost the attitude (the one that tripped the tilt limit, typically)."""
     vicon_loss_hold_s: float = 0.5
     vicon_loss_land_s: float = 2.0
     link_loss_s: float = 0.3
@@ -284,6 +288,9 @@ class Supervisor:
         return self.state
 
     def _land(self, obs: Observation) -> State:
+        if obs.tilt_rad > self.limits.handback_tilt_rad:
+            return self._go(obs.t, State.HANDBACK, f"landing failed: tilt "
+                            f"{math.degrees(obs.tilt_rad):.0f} deg, the pilot takes over")
         failsafe = self._airborne_failsafe(obs)
         if failsafe is not None:
             return self._go(obs.t, *failsafe)
