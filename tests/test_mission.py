@@ -96,3 +96,5 @@ def test_land_descends_to_below_the_ground() -> None:
     np.testing.assert_allclose(m.reference(5.0 + tau).position, [0.3, 0.1, -1.0 + depth])
     np.testing.assert_allclose(m.reference(5.0 + tau).velocity, [0.0, 0.0, 0.25])
     np.testing.assert_allclose(m.reference(60.0).position, [0.3, 0.1, 0.08])
+    m.enter(State.DISARM, 61.0, np.array([0.31, 0.12, 0.0]))  # on the floor where it landed
+    np.testing.assert_allclose(m.reference(61.5).position, [0.31, 0.12, 0.0])

@@ -31,7 +31,7 @@ def summary_lines(summary: FlightSummary) -> list[str]:
     p = summary.percentiles()
     lines.append(
         f"  ticks {summary.ticks}, commands {summary.commands_sent}; compute p50/p99 "
-        f"{1e6 * p['compute'][0]:.0f}/{1e6 * p['compute'][1]:.0f} us, |jitter| p99 "
+        f"{1e6 * p['compute'][0]:.0f}/{1e6 * p['compute'][1]:.0f} us, jitter p99 "
         f"{1e3 * p['jitter'][1]:.2f} ms, DATA->COMMAND latency p50/p99 "
         f"{1e3 * p['latency'][0]:.2f}/{1e3 * p['latency'][1]:.2f} ms")
     lines.append(f"  flight log: {summary.log_dir}")

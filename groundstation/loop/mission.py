@@ -12,7 +12,8 @@ Pure and clock-free: the flight core passes the time and the supervisor state.
 * HOLD: the position where the hold began, zero velocity.
 * LAND: descend from where landing began at ``land_speed`` (same profile) to just below the
   ground height (so the vehicle really touches down), then stay there.
-* DISARM and the rest: the ground point.
+* DISARM and after: where the vehicle was when the phase began (it is on the
+  floor; before take-off, the origin).
 
 All positions NED [m], velocities [m/s].
 """
@@ -103,6 +104,7 @@ class Mission:
         self._ground = np.zeros(3)
         self._path: list[_Segment] = []
         self._hold_point = np.zeros(3)
+        self._rest_point = np.zeros(3)
         self._track_clock = 0.0
         self._last_t: float | None = None
 
@@ -131,6 +133,8 @@ class Mission:
         elif state is State.LAND:
             end = np.array([position[0], position[1], self._ground[2] + self._depth])
             self._path = [_Segment(t, position.copy(), end, self._land)]
+        elif state is not State.TRACK:
+            self._rest_point = position.copy()
         self._state = state
         self._last_t = t  # time before this phase never advances the trajectory clock
 
@@ -161,4 +165,4 @@ class Mission:
             return Reference(t, pos, vel)
         if state is State.HOLD:
             return Reference(t, self._hold_point.copy(), np.zeros(3))
-        return Reference(t, self._ground.copy(), np.zeros(3))
+        return Reference(t, self._rest_point.copy(), np.zeros(3))
