@@ -12,16 +12,16 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterable
-from types import TracebackType
 from typing import Any
 
 import zmq
 
 from groundstation.errors import TelemetryError
+from groundstation.telemetry._zmqowner import ZmqOwner
 from groundstation.telemetry.schema import decode
 
 
-class TelemetryClient:
+class TelemetryClient(ZmqOwner):
     """Receives telemetry from a :class:`~groundstation.telemetry.publisher.TelemetryPublisher`.
 
     endpoint : the publisher's endpoint, e.g. ``tcp://127.0.0.1:5556``
@@ -35,10 +35,10 @@ class TelemetryClient:
         self, endpoint: str, topics: Iterable[str] = ("",), *, rcvhwm: int = 100,
         context: zmq.Context[Any] | None = None,
     ) -> None:
-        self._own_context = context is None
-        self._context: zmq.Context[Any] | None = zmq.Context() if context is None else context
+        self._open_context(context)
         self.bad_messages = 0
         """Messages that could not be decoded (skipped)."""
+        assert self._context is not None  # a client always needs a context
         sock = self._context.socket(zmq.SUB)
         try:
             sock.setsockopt(zmq.LINGER, 0)
@@ -72,21 +72,4 @@ class TelemetryClient:
 
     def close(self) -> None:
         """Close the socket and, if the client owns it, terminate the context (idempotent)."""
-        if self._socket is not None:
-            self._socket.close(linger=0)
-            self._socket = None
-        self._close_context()
-
-    def _close_context(self) -> None:
-        if self._own_context and self._context is not None:
-            self._context.term()
-            self._context = None
-
-    def __enter__(self) -> TelemetryClient:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
+        self._close_socket()

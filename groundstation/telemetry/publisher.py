@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from types import TracebackType
 from typing import Any
 
 import structlog
@@ -23,6 +22,7 @@ import zmq
 
 from groundstation.config import TelemetryConfig
 from groundstation.errors import TelemetryError
+from groundstation.telemetry._zmqowner import ZmqOwner
 from groundstation.telemetry.schema import SCHEMA_VERSION, TOPIC_HEALTH, encode
 
 log = structlog.get_logger(__name__)
@@ -31,7 +31,7 @@ Snapshot = Mapping[str, Mapping[str, Any]]
 """What a snapshot function returns: topic -> payload body (see schema.py)."""
 
 
-class TelemetryPublisher:
+class TelemetryPublisher(ZmqOwner):
     """Publishes rate-limited telemetry snapshots on a PUB socket.
 
     endpoint : where to bind, e.g. ``tcp://127.0.0.1:5556``, ``tcp://*:5556``, or
@@ -62,8 +62,7 @@ class TelemetryPublisher:
         """Snapshots or sends that failed for another reason."""
         self.endpoint: str | None = None
         """The bound endpoint with the actual port (None when disabled or closed)."""
-        self._own_context = context is None and endpoint is not None
-        self._context = zmq.Context() if self._own_context else context
+        self._open_context(context, needed=endpoint is not None)
         self._socket: zmq.Socket[Any] | None = None
         if endpoint is not None:
             self._bind(endpoint, sndhwm)
@@ -151,22 +150,5 @@ class TelemetryPublisher:
 
         Idempotent; pending messages are discarded (LINGER 0).
         """
-        if self._socket is not None:
-            self._socket.close(linger=0)
-            self._socket = None
+        self._close_socket()
         self.endpoint = None
-        self._close_context()
-
-    def _close_context(self) -> None:
-        if self._own_context and self._context is not None:
-            self._context.term()
-            self._context = None
-
-    def __enter__(self) -> TelemetryPublisher:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

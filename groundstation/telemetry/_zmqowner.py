@@ -1,0 +1,45 @@
+"""What the telemetry publisher and client share: one socket, and a context they may own."""
+
+from __future__ import annotations
+
+from types import TracebackType
+from typing import Any, Self
+
+import zmq
+
+
+class ZmqOwner:
+    """Owns at most one zmq socket and, unless one was shared, its context.
+
+    Subclasses set :attr:`_socket`; :meth:`close` closes it without lingering and
+    terminates the context if this object created it. Idempotent; a context manager.
+    """
+
+    _socket: zmq.Socket[Any] | None
+
+    def _open_context(self, shared: zmq.Context[Any] | None, needed: bool = True) -> None:
+        """Use ``shared``, or create (and own) a context if one is ``needed``."""
+        self._own_context = shared is None and needed
+        self._context: zmq.Context[Any] | None = zmq.Context() if self._own_context else shared
+
+    def _close_context(self) -> None:
+        if self._own_context and self._context is not None:
+            self._context.term()
+            self._context = None
+
+    def _close_socket(self) -> None:
+        if self._socket is not None:
+            self._socket.close(linger=0)
+            self._socket = None
+        self._close_context()
+
+    def close(self) -> None:
+        """Close the socket and terminate an owned context (idempotent)."""
+        self._close_socket()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
