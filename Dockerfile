@@ -25,6 +25,10 @@
 #   them in a volume. A bind mount must be writable by uid `groundstation`.
 # * No HEALTHCHECK: `gs fly` is one flight, not a long-running service, and
 #   Docker does not act on "unhealthy"; watch a flight with `gs monitor`.
+# * CPU wake-up latency (realtime.cpu_dma_latency_us): to hold the request, add
+#   `--device /dev/cpu_dma_latency` with the host's udev rule
+#   (config/99-groundstation.rules) giving the container user's group write access
+#   (`--group-add <gid>`); without it the daemon logs a warning and flies anyway.
 
 FROM python:3.11-slim AS build
 WORKDIR /src

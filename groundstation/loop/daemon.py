@@ -20,8 +20,12 @@ Timing per tick (recorded, summarised in :class:`FlightSummary`):
 * DATA interval: the spacing of DATA frames as received, a property of the link
   and the vehicle, reported beside the loop's own figures.
 
-While flying, the interpreter's thread switch interval is shortened to 0.5 ms
-(default 5 ms) so a reader thread holding the GIL cannot delay a tick by more.
+While flying, the daemon holds a PM QoS request for CPU wake-up latency
+(``realtime.cpu_dma_latency_us``, default 0 us) so the CPUs do not drop into
+deep idle states between DATA samples, and shortens the interpreter's thread
+switch interval to ``realtime.switch_interval_ms`` (0.5 ms; default 5 ms) so a
+reader thread holding the GIL cannot delay a tick by more (see
+:mod:`groundstation.loop.realtime`).
 
 Stopping: the first SIGINT/SIGTERM asks the supervisor to land (or hand back,
 see ``safety.on_signal``), a second one hands back at once. Whatever the way
@@ -33,11 +37,10 @@ from __future__ import annotations
 
 import math
 import signal
-import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
-from contextlib import ExitStack, contextmanager
+from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -51,6 +54,7 @@ from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
 from groundstation.loop.core import FlightCore, TickResult
 from groundstation.loop.inputs import DataFrontEnd
+from groundstation.loop.realtime import cpu_latency_request, switch_interval
 from groundstation.loop.recorder import FlightRecorder
 from groundstation.loop.sdnotify import SdNotifier
 from groundstation.loop.signals import on_stop_signals
@@ -175,7 +179,8 @@ class FlightDaemon:
             stack.callback(telemetry.close)
             self.telemetry_endpoint = telemetry.endpoint
             stack.enter_context(on_stop_signals(self._on_signal))
-            stack.enter_context(_switch_interval(0.0005))
+            stack.enter_context(cpu_latency_request(cfg.realtime.cpu_dma_latency_us))
+            stack.enter_context(switch_interval(cfg.realtime.switch_interval_ms / 1000.0))
             link.send(self._config_msg)
             notifier.ready("preflight")
             self.ready.set()
@@ -284,17 +289,6 @@ class FlightDaemon:
             data_interval=s.data_interval, commands_sent=s.sent,
             ticks=s.ticks, duration_s=s.t_end - s.t_start,
         )
-
-
-@contextmanager
-def _switch_interval(seconds: float) -> Iterator[None]:
-    """Shorten the GIL switch interval for the block (restored afterwards)."""
-    previous = sys.getswitchinterval()
-    sys.setswitchinterval(seconds)
-    try:
-        yield
-    finally:
-        sys.setswitchinterval(previous)
 
 
 def _drain(vicon: ViconClient) -> list[Pose]:
