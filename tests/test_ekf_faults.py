@@ -361,3 +361,52 @@ def test_velocity_error_the_imu_did_not_see_is_corrected_quickly() -> None:
     assert err[t > 2.6].max() < 0.02  # re-anchored and the velocity re-learned
     assert abs(ekf.estimate().velocity_body[2]) < 0.05
     assert ekf.health().resets >= 1
+
+
+@pytest.mark.parametrize("gap", [1, 4])  # one sample ahead; 40 ms ahead (sub-stepped)
+def test_estimate_ahead_is_the_prediction_without_moving_the_filter(gap: int) -> None:
+    """``estimate_ahead`` must give exactly the nominal state ``predict`` would reach (the
+    same RK4 steps and input interpolation), leave the filter where it is, and carry the
+    filter's covariance, not a predicted one."""
+    ekf, sim = _started(steps=200)
+    for _ in range(gap):
+        sim.step()
+    imu = sim.imu()
+    x0, p0, t0 = ekf.state, ekf.error_covariance, ekf.health().t
+    ahead = ekf.estimate_ahead(imu)
+    np.testing.assert_array_equal(ekf.state, x0)  # the filter did not move
+    np.testing.assert_array_equal(ekf.error_covariance, p0)
+    current = ekf.estimate()
+    ekf.predict(imu)  # now move it: the state must be the one predicted
+    moved = ekf.estimate()
+    assert ahead.t == moved.t == pytest.approx(t0 + gap * 0.01)
+    for field in ("position", "quaternion", "velocity_body", "omega", "gyro_bias", "acc_bias"):
+        np.testing.assert_allclose(getattr(ahead, field), getattr(moved, field),
+                                   atol=1e-14, rtol=0, err_msg=field)
+    keep = np.r_[0:3, 7:16]  # the quaternion entries map the same attitude-error block
+    np.testing.assert_array_equal(ahead.covariance_diag[keep], current.covariance_diag[keep])
+    assert ahead.covariance_diag[3:7].sum() == pytest.approx(current.covariance_diag[3:7].sum(),
+                                                             rel=1e-12)  # trace(P_tt) / 4
+    assert ahead.t > current.t
+
+
+def test_estimate_ahead_of_a_sample_predict_would_skip_is_the_estimate() -> None:
+    ekf, sim = _started(steps=50)
+    last = sim.imu()  # already predicted: not newer, same counter
+    bad = ImuSample(last.t + 0.01, np.array([np.nan, 0.0, 0.0]), last.acc, last.counter + 1)
+    for imu in (last, bad):
+        ahead, now = ekf.estimate_ahead(imu), ekf.estimate()
+        assert ahead.t == now.t
+        np.testing.assert_array_equal(ahead.position, now.position)
+    assert ekf.health().invalid_imu == 0  # counted when predict sees it, not here
+
+
+def test_late_poses_are_counted() -> None:
+    imus, poses = _recorded(40)
+    ekf = Ekf()
+    ekf.initialise(poses[0], [imus[0]])
+    for k in range(1, 40):
+        ekf.predict(imus[k])
+        if k >= 2:
+            assert ekf.update(poses[k - 1]).reason == "ok"  # stamped before the filter time
+    assert ekf.health().late_poses == 38

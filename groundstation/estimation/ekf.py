@@ -205,18 +205,56 @@ class Ekf:
 
     def estimate(self) -> StateEstimate:
         """The current estimate at the filter time (new arrays; safe to keep)."""
-        x, P = self._x, self._P
+        return self._estimate_of(self._t, self._x, self._gyro)
+
+    def estimate_ahead(self, imu: ImuSample) -> StateEstimate:
+        """The estimate at ``imu.t``, predicted from the filter state with the nominal
+        model only; the filter itself does not move (call :meth:`predict` for that).
+
+        This is the output side of a filter that runs one IMU sample behind (the
+        flight core's arrangement, as PX4's ekf2 runs on a delayed horizon): Vicon
+        poses, which arrive stamped a few ms in the past, then land after the filter
+        time and are fused in order inside the next :meth:`predict` instead of
+        restoring a checkpoint and re-propagating. Poses queued for times up to
+        ``imu.t`` are not applied here (they are at the next :meth:`predict`), and the
+        covariance is the filter's, at the filter time (its attitude block mapped to
+        the predicted quaternion). A sample that
+        :meth:`predict` would skip (not newer, non-finite, a repeated counter) gives
+        :meth:`estimate`.
+        """
+        dt = float(imu.t) - self._t
+        if not self._initialised or not dt > 0.0 or self._first_imu \
+                or (self._last_imu is not None and imu.counter == self._last_imu[0]) \
+                or not bool(np.isfinite(imu.gyro).all() and np.isfinite(imu.acc).all()):
+            return self.estimate()
+        x = self._x.copy()
+        g0, a0 = self._gyro, self._acc
+        if dt <= self.params.max_step:
+            propagate(x, g0, a0, imu.gyro, imu.acc, dt, self._g, x)
+        else:  # sub-steps exactly as _propagate_to, input linear in time
+            n = math.ceil(dt / self.params.max_step)
+            for i in range(1, n + 1):
+                f = i / n
+                g1, a1 = g0 + f * (imu.gyro - g0), a0 + f * (imu.acc - a0)
+                propagate(x, g0, a0, g1, a1, dt / n, self._g, x)
+                g0, a0 = g1, a1
+        return self._estimate_of(float(imu.t), x, imu.gyro)
+
+    def _estimate_of(self, t: float, x: FloatArray, gyro: FloatArray) -> StateEstimate:
+        """A StateEstimate of state ``x`` at ``t`` with the measured ``gyro`` there and
+        the filter's covariance (the quaternion block mapped from the attitude error)."""
+        P = self._P
         q0, q1, q2, q3 = x[3:7].tolist()
         Xi = np.array([[-q1, -q2, -q3], [q0, -q3, q2], [q3, q0, -q1], [-q2, q1, q0]])
         qvar = 0.25 * np.einsum("ij,jk,ik->i", Xi, P[3:6, 3:6], Xi)
         d = np.diagonal(P)
         cov = np.concatenate((d[0:3], qvar, d[6:15]))
         return StateEstimate(
-            t=self._t,
+            t=t,
             position=x[0:3].copy(),
             quaternion=x[3:7].copy(),
             velocity_body=x[7:10].copy(),
-            omega=self._gyro - x[10:13],
+            omega=gyro - x[10:13],
             gyro_bias=x[10:13].copy(),
             acc_bias=x[13:16].copy(),
             covariance_diag=cov,
@@ -239,6 +277,7 @@ class Ekf:
             too_old=self.too_old + self.future,
             invalid_poses=self.invalid_poses,
             resets=self.resets,
+            late_poses=self.late_poses,
             repeated_imu=self.repeated_imu,
             invalid_imu=self.invalid_imu,
             stale_imu=self.stale_imu,
@@ -273,7 +312,7 @@ class Ekf:
     # ------------------------------------------------------------------ internals
     def _reset_counters(self) -> None:
         self.updates = self.gated = self.repeated_poses = self.lost_tracking = 0
-        self.too_old = self.future = self.invalid_poses = self.resets = 0
+        self.too_old = self.future = self.invalid_poses = self.resets = self.late_poses = 0
         self.repeated_imu = self.invalid_imu = self.stale_imu = 0
         self.consecutive_gated = 0
         self.last_nis = _NAN
@@ -464,6 +503,7 @@ class Ekf:
     def _replay(self, pose: Pose) -> UpdateResult:
         """Apply a pose older than the filter time: restore the checkpoint at or before
         it, then re-propagate every stored IMU sample and re-fuse later poses."""
+        self.late_poses += 1
         new = _Fused(pose, "ok")
         k = self._hist.restore_before(new.t, self._x, self._P, self._gyro, self._acc)
         self._t = self._hist.time(k)

@@ -216,7 +216,8 @@ class EkfHealth:
     diverged : trace above ``divergence_trace``.
     last_nis : NIS of the last applied or gated update (NaN before one).
     updates, gated, repeated_poses, lost_tracking, too_old (also counts poses too
-    far ahead of the IMU), invalid_poses, resets : pose counters;
+    far ahead of the IMU), invalid_poses, resets, late_poses (older than the
+    filter time: fused by restoring a checkpoint and re-propagating) : pose counters;
     repeated_imu, invalid_imu, stale_imu : IMU counters (stale = not newer than
     the filter time).
     """
@@ -234,6 +235,7 @@ class EkfHealth:
     too_old: int
     invalid_poses: int
     resets: int
+    late_poses: int
     repeated_imu: int
     invalid_imu: int
     stale_imu: int
