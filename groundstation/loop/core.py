@@ -8,7 +8,9 @@ is what flies.
 Per tick (one DATA sample, 100 Hz):
 
 1. estimator: initialise from the first Vicon fix and a few IMU samples, then
-   predict on the IMU sample and update on every Vicon pose at its own time;
+   fuse every Vicon pose at its own time stamp; the filter runs one IMU sample
+   behind and the estimate handed on is predicted to the newest sample (see
+   :meth:`FlightCore.estimate_step`);
 2. supervisor: observe link, Vicon, estimator, pilot and position; change state;
 3. mission: the reference for the current phase;
 4. controller -> body rates and F_z -> stick units -> channel handover ->
@@ -114,6 +116,7 @@ class FlightCore:
         self.init_report: InitReport | None = None
         self._settle_s = config.estimator.settle_time_s
         self._last_pose: Pose | None = None
+        self._held: ImuSample | None = None
         self._estimate: StateEstimate | None = None
 
     # ------------------------------------------------------------------ public
@@ -155,7 +158,18 @@ class FlightCore:
 
     # ------------------------------------------------------------------ steps
     def estimate_step(self, imu: ImuSample | None, poses: Sequence[Pose]) -> StateEstimate | None:
-        """The estimator part of a tick (initialise, fuse poses, predict); public for replay."""
+        """The estimator part of a tick (initialise, fuse poses, predict); public for replay.
+
+        The filter runs one IMU sample behind: this tick's sample is held, the filter
+        advances to the previous one, and the estimate returned is the filter state
+        predicted to this sample with the nominal model (:meth:`Ekf.estimate_ahead`).
+        A Vicon pose is stamped a few ms before it arrives, so with the filter at the
+        newest sample nearly every pose would be older than the filter time and cost
+        a checkpoint restore and re-propagation (measured: every pose in a real-time
+        flight); one sample behind, it is newer and is fused in order inside the next
+        prediction. The estimate carries the same information either way, except a
+        pose stamped after the previous sample waits one tick.
+        """
         if poses:
             self._last_pose = poses[-1]
         if self.init_report is None:
@@ -166,13 +180,17 @@ class FlightCore:
                 self._t_init = self._last_pose.t
             return None
         # Poses first: one newer than the filter time is deferred and fused inside the
-        # next prediction step at its own time stamp; fusing it after the prediction
-        # would make the EKF restore a checkpoint and re-propagate (same result, ~2x cost).
+        # prediction step at its own time stamp; fusing it after the prediction would
+        # make the EKF restore a checkpoint and re-propagate (same result, ~2x cost).
         for pose in poses:
             self.ekf.update(pose)
         if imu is not None:
-            self.ekf.predict(imu)
-        return self.ekf.estimate()
+            if self._held is not None:
+                self.ekf.predict(self._held)
+            self._held = imu
+        if self._held is None:
+            return self.ekf.estimate()
+        return self.ekf.estimate_ahead(self._held)
 
     def _observe(self, t: float, vehicle: VehicleStatus, health: InputHealth,
                  stop_requests: int) -> Observation:
