@@ -113,6 +113,38 @@ def test_a_landing_that_loses_the_attitude_is_handed_back() -> None:
     assert "landing failed" in sup.transitions[-1].reason and not sup.success
 
 
+ABOVE_THE_FLOOR = {"position": (0.0, 0.0, -0.15), "height_above_ground_m": 0.15}
+
+
+@pytest.mark.parametrize(
+    ("lift", "force_g", "landed"),
+    [(0.3, 1.0, True),  # little lift, 1 g felt: the floor holds it up
+     (0.3, 0.62, False),  # little lift and falling: in the air
+     (0.95, 1.0, False),  # hover lift, 1 g: flying (or resting on its rotors)
+     (0.59, 1.19, True), (0.61, 1.0, False), (0.3, 1.21, False)],  # the bounds
+)
+def test_ground_contact_lands_whatever_the_height_estimate(lift: float, force_g: float,
+                                                           landed: bool) -> None:
+    """Landing without Vicon: the height estimate says 15 cm up, the physics says down."""
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 1, trajectory_done=True, **FLYING_AT_1M)) is State.LAND
+    felt = {"lift_fraction": lift, "specific_force_g": force_g, **ABOVE_THE_FLOOR}
+    assert sup.update(obs(t + 2.0, **felt)) is State.LAND
+    assert sup.update(obs(t + 2.4, **felt)) is State.LAND  # not yet landed_time_s (0.5 s)
+    end = sup.update(obs(t + 2.5, **felt))
+    assert end is (State.DISARM if landed else State.LAND)
+    if landed:
+        assert "ground contact felt at estimated height 0.15 m" in sup.transitions[-1].reason
+    # A contact that does not last resets the timer.
+    sup2 = Supervisor()
+    t = airborne(sup2)
+    sup2.update(obs(t + 1, trajectory_done=True, **FLYING_AT_1M))
+    sup2.update(obs(t + 2.0, **felt))
+    sup2.update(obs(t + 2.3, **ABOVE_THE_FLOOR))
+    assert sup2.update(obs(t + 2.6, **felt)) is State.LAND
+
+
 def test_estimator_divergence_hands_back_at_once() -> None:
     sup = Supervisor()
     t = airborne(sup)

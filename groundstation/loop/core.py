@@ -108,6 +108,8 @@ class FlightCore:
         self.handover = ChannelHandover(blend_time=config.serial.handover_blend_s)
         self._auto = tuple(config.channels.auto)
         self._stick_params = StickParams.from_quadrotor(quad)
+        self._weight = quad.mass * quad.g  # [N]
+        self._lift_fraction = 1.0  # last commanded lift / weight, for the landing check
         self._command_period = 1.0 / config.serial.command_rate_hz
         self._next_command = -math.inf
         self._was_commanding = False
@@ -207,6 +209,10 @@ class FlightCore:
             tilt = math.acos(min(max(cos_tilt, -1.0), 1.0))
         airborne = self.supervisor.state not in (State.PREFLIGHT,)
         height = float(self.mission.ground[2] - position[2]) if airborne else 0.0
+        force_g = 1.0
+        if est is not None and self._held is not None:
+            a1, a2, a3 = (self._held.acc - est.acc_bias).tolist()
+            force_g = math.sqrt(a1 * a1 + a2 * a2 + a3 * a3) / self.ekf.params.g
         return Observation(
             t=t, data_age_s=health.data_age_s, data_rate_hz=health.data_rate_hz,
             vicon_age_s=health.vicon_age_s, vicon_rate_hz=health.vicon_rate_hz,
@@ -216,7 +222,8 @@ class FlightCore:
             takeoff_done=self.mission.takeoff_done(t, position),
             trajectory_done=self.mission.trajectory_done(),
             pilot_enabled=vehicle.pilot_enabled, vehicle_applying=vehicle.applying,
-            stop_requests=stop_requests,
+            stop_requests=stop_requests, lift_fraction=self._lift_fraction,
+            specific_force_g=force_g,
         )
 
     def _position(self) -> np.ndarray:
@@ -239,5 +246,6 @@ class FlightCore:
         if state is State.DISARM:
             return Sticks(0, 0, 0, 0)  # motors to idle on the floor before handing back
         output = self.controller.step(t, est, reference)
+        self._lift_fraction = 1.0 - output.f_z / self._weight  # f_z = F_lift + m g, lift < 0
         sticks, _flags = to_sticks(output, self._stick_params)
         return sticks

@@ -81,6 +81,11 @@ class SupervisorLimits:
     takeoff_tolerance_m: float = 0.1
     landed_height_m: float = 0.05
     landed_time_s: float = 0.5
+    """Landed: below landed_height_m or in ground contact, for this long."""
+    contact_lift_fraction: float = 0.6
+    """Ground contact: commanded lift below this fraction of the weight ..."""
+    contact_accel_tolerance: float = 0.2
+    """... while the specific force is within this fraction of g of 1 g."""
     disarm_time_s: float = 0.5
     pilot_grace_s: float = 0.2
     """The X-3D may report 'not applying' briefly (a watchdog blip); longer is the pilot."""
@@ -106,6 +111,12 @@ class Observation:
     pilot_enabled : RC serial-enable switch on
     vehicle_applying : STATUS bit0, the X-3D applies our commands
     stop_requests : number of SIGINT/SIGTERM received so far
+    lift_fraction : the lift last commanded, as a fraction of the weight (1 in hover)
+    specific_force_g : magnitude of the bias-corrected accelerometer reading [g]
+        (1 at rest or in hover). Little lift while still feeling 1 g means the floor
+        holds the vehicle up: a vehicle in the air with that little lift would be
+        falling and feel less. This landing check does not use the height
+        estimate, which drifts when a landing is flown without Vicon.
     """
 
     t: float
@@ -124,6 +135,8 @@ class Observation:
     pilot_enabled: bool
     vehicle_applying: bool
     stop_requests: int = 0
+    lift_fraction: float = 1.0
+    specific_force_g: float = 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -294,11 +307,17 @@ class Supervisor:
         failsafe = self._airborne_failsafe(obs)
         if failsafe is not None:
             return self._go(obs.t, *failsafe)
-        if obs.height_above_ground_m < self.limits.landed_height_m:
+        lim = self.limits
+        contact = (obs.lift_fraction < lim.contact_lift_fraction
+                   and abs(obs.specific_force_g - 1.0) < lim.contact_accel_tolerance)
+        if obs.height_above_ground_m < lim.landed_height_m or contact:
             if self._landed_since is None:
                 self._landed_since = obs.t
             elif obs.t - self._landed_since >= self.limits.landed_time_s:
-                return self._go(obs.t, State.DISARM, "on the floor")
+                if obs.height_above_ground_m < self.limits.landed_height_m:
+                    return self._go(obs.t, State.DISARM, "on the floor")
+                return self._go(obs.t, State.DISARM, "on the floor: ground contact felt at "
+                                f"estimated height {obs.height_above_ground_m:.2f} m")
         else:
             self._landed_since = None
         return self.state
