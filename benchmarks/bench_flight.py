@@ -12,6 +12,7 @@ growth beyond a few MB; peak reported).
     .venv/bin/python benchmarks/bench_flight.py                 # 60 s on the square
     .venv/bin/python benchmarks/bench_flight.py --minutes 30    # the memory soak
     .venv/bin/python benchmarks/bench_flight.py --command-rate 100
+    .venv/bin/python benchmarks/bench_flight.py --cpu-latency-us none   # idle states allowed
 
 Targets: compute p99 <= 200 us, jitter p99 <= 1 ms, latency p99 <= 2 ms,
 commands at the configured rate, RSS growth <= a few MB over 30 minutes.
@@ -57,6 +58,8 @@ def main() -> int:
     parser.add_argument("--minutes", type=float, default=None, help="overrides --seconds")
     parser.add_argument("--command-rate", type=float, default=50.0)
     parser.add_argument("--controller", default="lqr-cv")
+    parser.add_argument("--cpu-latency-us", default="0",
+                        help="realtime.cpu_dma_latency_us while flying; 'none' makes no request")
     args = parser.parse_args()
     seconds = args.minutes * 60.0 if args.minutes else args.seconds
     tmp = Path(tempfile.mkdtemp(prefix="bench_flight_"))
@@ -65,6 +68,8 @@ def main() -> int:
         "controller.type": args.controller, "serial.command_rate_hz": args.command_rate,
         "telemetry.endpoint": "tcp://127.0.0.1:*", "logging.flight_log_dir": str(tmp),
         "logging.level": "warning", "sim.truth_file": str(tmp / "truth.npz"),
+        "realtime.cpu_dma_latency_us":
+            None if args.cpu_latency_us == "none" else int(args.cpu_latency_us),
     })
     cfg_file = tmp / "bench.yaml"
     cfg_file.write_text(dump_config(cfg))
