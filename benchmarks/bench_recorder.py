@@ -13,6 +13,7 @@ import time
 
 import numpy as np
 
+from groundstation.asctec.messages import CommandMsg
 from groundstation.loop.recorder import FlightRecorder
 from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
 
@@ -25,6 +26,7 @@ def main(ticks: int = 20_000) -> None:
                         np.zeros(3), np.zeros(3), np.zeros(3), np.full(16, 1e-4))
     ref = Reference(0.0, np.array([0.0, 0.0, -1.0]), np.zeros(3))
     sticks = Sticks(10, -10, 0, 2000)
+    command = CommandMsg(pitch=-10, roll=10, yaw=0, thrust=2000, ctrl=15)
     cost = np.empty(ticks)
     with tempfile.TemporaryDirectory() as tmp:
         with FlightRecorder.create(tmp, "bench: true\n") as rec:
@@ -32,7 +34,7 @@ def main(ticks: int = 20_000) -> None:
                 start = time.perf_counter()
                 rec.append(t=0.01 * k, imu=imu, gyro_counts=(2048, 2048, 2048),
                            acc_counts=(2048, 2048, 3190), pose=pose if k % 2 else None,
-                           estimate=est, reference=ref, sticks=sticks, ctrl_mask=15,
+                           estimate=est, reference=ref, command=command, controller=sticks,
                            sent=True, state=2, compute_time=1e-3, jitter=1e-4, latency=5e-3)
                 cost[k] = time.perf_counter() - start
         flushes = cost[::100]  # every 100th tick (1 s at 100 Hz) also flushed

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.asctec.messages import CommandMsg
 from groundstation.config import apply_overrides, load_config
 from groundstation.errors import RecorderError
 from groundstation.evaluation.record import (
@@ -64,7 +65,8 @@ def write_log(directory: Path, n: int = 1000) -> Path:
             rec.append(t=t, imu=ImuSample(t, np.zeros(3), np.array([0.0, 0.0, -9.82]), k),
                        gyro_counts=(2048, 2048, 2048), acc_counts=(2048, 2048, 1163),
                        pose=pose, estimate=est, reference=Reference(t, HOVER, np.zeros(3)),
-                       sticks=Sticks(0, 0, 0, 2000), ctrl_mask=15, sent=k % 2 == 0,
+                       command=CommandMsg(thrust=2000, ctrl=15),
+                       controller=Sticks(0, 0, 0, 2000), sent=k % 2 == 0,
                        state=int(state_at(k)), compute_time=1e-4 + 1e-6 * (k % 50),
                        jitter=1e-4, latency=2e-4)
         return rec.directory

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from groundstation import __version__
+from groundstation.asctec.messages import CommandMsg
 from groundstation.errors import GroundStationError
 from groundstation.loop.recorder import (
     COLUMN_UNITS,
@@ -49,16 +50,19 @@ def make_tick(rng: np.random.Generator, k: int) -> dict[str, Any]:
         estimate=StateEstimate(100.0 + 0.01 * k, *(rng.normal(size=n) for n in (3, 4, 3, 3, 3, 3)),
                                rng.random(16)),
         reference=Reference(0.01 * k, rng.normal(size=3), rng.normal(size=3), yaw=rng.normal()),
-        sticks=Sticks(*(int(v) for v in rng.integers(-2048, 2048, 3)),
-                      int(rng.integers(0, 4097))),
-        ctrl_mask=int(rng.integers(0, 16)), sent=bool(k % 2), state=k % 3,
+        command=CommandMsg(*(int(v) for v in rng.integers(-2047, 2048, 3)),
+                           int(rng.integers(0, 4097)), int(rng.integers(0, 16))),
+        controller=None if k % 4 == 0 else Sticks(
+            *(int(v) for v in rng.integers(-2048, 2048, 3)), int(rng.integers(0, 4097))),
+        sent=bool(k % 2), state=k % 3,
         compute_time=rng.random() * 1e-3, jitter=rng.normal() * 1e-4, latency=rng.random() * 1e-2,
     )
 
 
 def expected_row(a: dict[str, Any]) -> dict[str, Any]:
     """The record fields append() must store for the arguments ``a``."""
-    pose, est, ref, sticks = a["pose"], a["estimate"], a["reference"], a["sticks"]
+    pose, est, ref, cmd = a["pose"], a["estimate"], a["reference"], a["command"]
+    ctrl = a["controller"] if a["controller"] is not None else Sticks(0, 0, 0, 0)
     nan3, nan4 = np.full(3, np.nan), np.full(4, np.nan)
     return {
         "t": a["t"], "imu_t": a["imu"].t, "imu_counter": a["imu"].counter,
@@ -73,8 +77,10 @@ def expected_row(a: dict[str, Any]) -> dict[str, Any]:
         "est_gyro_bias": est.gyro_bias, "est_acc_bias": est.acc_bias,
         "est_covariance_diag": est.covariance_diag,
         "ref_position": ref.position, "ref_velocity": ref.velocity, "ref_yaw": ref.yaw,
-        "cmd_pitch": sticks.pitch, "cmd_roll": sticks.roll, "cmd_yaw": sticks.yaw,
-        "cmd_thrust": sticks.thrust, "cmd_mask": a["ctrl_mask"], "cmd_sent": a["sent"],
+        "cmd_pitch": cmd.pitch, "cmd_roll": cmd.roll, "cmd_yaw": cmd.yaw,
+        "cmd_thrust": cmd.thrust, "cmd_mask": cmd.ctrl, "cmd_sent": a["sent"],
+        "ctrl_pitch": ctrl.pitch, "ctrl_roll": ctrl.roll, "ctrl_yaw": ctrl.yaw,
+        "ctrl_thrust": ctrl.thrust,
         "state": a["state"], "compute_time": a["compute_time"], "jitter": a["jitter"],
         "latency": a["latency"],
     }
@@ -236,7 +242,7 @@ def test_bad_values_skip_the_row_and_close_is_idempotent(tmp_path: Path) -> None
     good = make_tick(rng, 1)
     rec = FlightRecorder.create(tmp_path, CONFIG)
     rec.append(**{**good, "gyro_counts": (1, 2)})  # wrong shape
-    rec.append(**{**good, "sticks": Sticks(thrust=70000)})  # beyond int16
+    rec.append(**{**good, "controller": Sticks(thrust=70000)})  # beyond int16
     rec.append(**good)
     assert rec.bad_rows == 2 and rec.rows == 1
     rec.close()

@@ -229,8 +229,7 @@ class FlightDaemon:
             compute = time.monotonic() - start
             self._account(start - scheduled, compute, latency, result)
             ticklog.record(start, rx.msg if rx is not None else None, imu, poses, result,
-                           self._front.status.pilot, compute=compute,
-                           jitter=start - scheduled, latency=latency)
+                           compute=compute, jitter=start - scheduled, latency=latency)
             telemetry.maybe_publish(start, partial(self._snapshot, result, link, vicon))
             if wd_interval is not None and start >= next_wd:
                 notifier.watchdog()

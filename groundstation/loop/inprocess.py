@@ -149,8 +149,8 @@ class InProcessFlight:
         self._last = result
         self._record(t, result)
         if self._ticklog is not None:
-            self._ticklog.record(t, msg, imu, list(poses), result, self._front.status.pilot,
-                                 compute=compute, jitter=0.0, latency=compute)
+            self._ticklog.record(t, msg, imu, list(poses), result, compute=compute, jitter=0.0,
+                                 latency=compute)
 
     def _record(self, t: float, r: TickResult) -> None:
         truth = self.lab.truth

@@ -48,10 +48,14 @@ Fields (frames: NED earth, FRD body; quaternions scalar-first, R(q) = eCb)::
     ref_position (3,)    m        reference, NED (NaN when there is none)
     ref_velocity (3,)    m/s      reference velocity, NED
     ref_yaw              rad      reference heading
-    cmd_pitch, cmd_roll, cmd_yaw  RC unit  stick values, -2048..2047 (thesis signs)
+    cmd_pitch, cmd_roll, cmd_yaw  RC unit  the COMMAND's stick values, -2048..2047
+                                  (thesis signs; after the channel handover)
     cmd_thrust           RC unit  0..4096
     cmd_mask             bits     ctrl mask (bit0 pitch .. bit3 thrust)
     cmd_sent             bool     a COMMAND frame was written this tick
+    ctrl_pitch, ctrl_roll, ctrl_yaw, ctrl_thrust
+                         RC unit  the controller's sticks before the handover blend
+                                  (0 when the controller did not run this tick)
     state                -        supervisor state (names in meta["supervisor_states"])
     compute_time         s        time spent computing this tick
     jitter               s        tick start minus its scheduled time
@@ -74,6 +78,7 @@ import numpy.typing as npt
 import structlog
 
 from groundstation import __version__
+from groundstation.asctec.messages import CommandMsg
 from groundstation.errors import RecorderError
 from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
 
@@ -83,6 +88,7 @@ SCHEMA_VERSION = 1
 """Bumped whenever :data:`RECORD_DTYPE` changes; stored in meta.json."""
 
 _XYZ = ("x", "y", "z")
+_NO_STICKS = Sticks(0, 0, 0, 0)
 _Q = ("q0", "q1", "q2", "q3")
 _COV = ("px", "py", "pz", "q0", "q1", "q2", "q3", "vx", "vy", "vz",
         "bgx", "bgy", "bgz", "bax", "bay", "baz")
@@ -117,6 +123,10 @@ _SCHEMA: tuple[tuple[str, str, tuple[str, ...] | None, str | tuple[str, ...]], .
     ("cmd_thrust", "<i2", None, "RC unit"),
     ("cmd_mask", "|u1", None, "bits"),
     ("cmd_sent", "|b1", None, "bool"),
+    ("ctrl_pitch", "<i2", None, "RC unit"),
+    ("ctrl_roll", "<i2", None, "RC unit"),
+    ("ctrl_yaw", "<i2", None, "RC unit"),
+    ("ctrl_thrust", "<i2", None, "RC unit"),
     ("state", "|u1", None, "enum"),
     ("compute_time", "<f8", None, "s"),
     ("jitter", "<f8", None, "s"),
@@ -309,7 +319,7 @@ class FlightRecorder:
     def append(
         self, *, t: float, imu: ImuSample, gyro_counts: Sequence[int], acc_counts: Sequence[int],
         pose: Pose | None, estimate: StateEstimate | None, reference: Reference | None,
-        sticks: Sticks, ctrl_mask: int, sent: bool, state: int,
+        command: CommandMsg, controller: Sticks | None, sent: bool, state: int,
         compute_time: float, jitter: float, latency: float,
     ) -> None:
         """Record one tick (hot path: no validation, no allocation).
@@ -318,7 +328,8 @@ class FlightRecorder:
         imu : the IMU sample of this tick; gyro_counts, acc_counts: its raw (3,) counts
         pose : the Vicon pose used this tick, or None (vicon_valid False, NaN values)
         estimate, reference : None before they exist (NaN values)
-        sticks, ctrl_mask, sent : the command, its ctrl mask, whether it was written
+        command : the COMMAND of this tick; sent : whether it was written
+        controller : the controller's sticks before the handover (None: it did not run)
         state : supervisor state as an int; compute_time, jitter, latency [s]
         Values that do not fit (wrong shape, out of the column's range) skip the row
         and count in :attr:`bad_rows`; appending after close is ignored.
@@ -341,12 +352,17 @@ class FlightRecorder:
                 c["ref_position"][i] = reference.position
                 c["ref_velocity"][i] = reference.velocity
                 c["ref_yaw"][i] = reference.yaw
-            c["cmd_pitch"][i] = sticks.pitch
-            c["cmd_roll"][i] = sticks.roll
-            c["cmd_yaw"][i] = sticks.yaw
-            c["cmd_thrust"][i] = sticks.thrust
-            c["cmd_mask"][i] = ctrl_mask
+            c["cmd_pitch"][i] = command.pitch
+            c["cmd_roll"][i] = command.roll
+            c["cmd_yaw"][i] = command.yaw
+            c["cmd_thrust"][i] = command.thrust
+            c["cmd_mask"][i] = command.ctrl
             c["cmd_sent"][i] = sent
+            s = controller if controller is not None else _NO_STICKS
+            c["ctrl_pitch"][i] = s.pitch
+            c["ctrl_roll"][i] = s.roll
+            c["ctrl_yaw"][i] = s.yaw
+            c["ctrl_thrust"][i] = s.thrust
             c["state"][i] = state
             c["compute_time"][i] = compute_time
             c["jitter"][i] = jitter

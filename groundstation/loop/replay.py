@@ -123,7 +123,7 @@ def replay_flight(log: str, config: GroundStationConfig | None = None) -> Replay
                             np.array(row["ref_velocity"], dtype=float), yaw=float(row["ref_yaw"]))
             out = core.controller.step(float(row["t"]), _logged_estimate(row), ref)
             sticks, _ = to_sticks(out, sticks_params)
-            logged = (row["cmd_roll"], row["cmd_pitch"], row["cmd_yaw"], row["cmd_thrust"])
+            logged = (row["ctrl_roll"], row["ctrl_pitch"], row["ctrl_yaw"], row["ctrl_thrust"])
             replayed = (sticks.roll, sticks.pitch, sticks.yaw, sticks.thrust)
             diff = np.abs(np.array(replayed, dtype=int) - np.array(logged, dtype=int))
             stick_max = np.maximum(stick_max, diff)

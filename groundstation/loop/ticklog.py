@@ -9,7 +9,7 @@ from __future__ import annotations
 from groundstation.asctec.messages import DataMsg
 from groundstation.loop.core import TickResult
 from groundstation.loop.recorder import FlightRecorder
-from groundstation.types import ImuSample, Pose, Sticks
+from groundstation.types import ImuSample, Pose
 
 
 class TickLogger:
@@ -24,7 +24,7 @@ class TickLogger:
         self._imu: ImuSample | None = None
 
     def record(self, t: float, raw: DataMsg | None, imu: ImuSample | None,
-               poses: list[Pose], result: TickResult, pilot: Sticks, *, compute: float,
+               poses: list[Pose], result: TickResult, *, compute: float,
                jitter: float, latency: float) -> None:
         """Append the tick at monotonic time ``t`` [s] (see the recorder's field list)."""
         if raw is not None and raw.gyro is not None and raw.acc is not None:
@@ -34,12 +34,11 @@ class TickLogger:
         raw, last = self._raw, self._imu
         if raw is None or last is None or raw.gyro is None or raw.acc is None:
             return
-        sticks = result.sticks if result.sticks is not None else pilot
         self.recorder.append(
             t=t, imu=last, gyro_counts=(raw.gyro.x, raw.gyro.y, raw.gyro.z),
             acc_counts=(raw.acc.x, raw.acc.y, raw.acc.z),
             pose=poses[-1] if poses else None, estimate=result.estimate,
-            reference=result.reference, sticks=sticks, ctrl_mask=result.command.ctrl,
+            reference=result.reference, command=result.command, controller=result.sticks,
             sent=result.due, state=int(result.state), compute_time=compute, jitter=jitter,
             latency=latency,
         )
