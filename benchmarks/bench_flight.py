@@ -67,6 +67,7 @@ def main() -> int:
         "trajectory.name": "square", "vicon.port": free_udp_port(),
         "controller.type": args.controller, "serial.command_rate_hz": args.command_rate,
         "telemetry.endpoint": "tcp://127.0.0.1:*", "logging.flight_log_dir": str(tmp),
+        "telemetry.control_endpoint": "tcp://127.0.0.1:*",
         "logging.level": "warning", "sim.truth_file": str(tmp / "truth.npz"),
         "realtime.cpu_dma_latency_us":
             None if args.cpu_latency_us == "none" else int(args.cpu_latency_us),

@@ -219,6 +219,35 @@ def monitor(
         raise _fail(str(exc), 1) from exc
 
 
+@app.command()
+def channels(
+    auto: Annotated[list[str] | None, typer.Argument(
+        help="Channels to put under automatic control (pitch, roll, yaw, thrust); "
+             "the others go to the pilot. None: show the current set.")] = None,
+    endpoint: Annotated[str, typer.Option(help="The daemon's telemetry.control_endpoint.")] =
+        "tcp://127.0.0.1:5557",
+    timeout: Annotated[float, typer.Option(help="Seconds to wait for the reply.")] = 2.0,
+) -> None:
+    """Hand channels between the controller and the pilot while flying (bumpless).
+
+    Example, tuning altitude: `gs channels thrust` (the pilot flies attitude and
+    yaw), then `gs channels pitch roll yaw thrust` to hand everything back to the
+    controller.
+    """
+    from groundstation.telemetry.control import send_request
+
+    request: dict[str, Any] = {"request": "channels"}
+    if auto:
+        request["auto"] = auto
+    try:
+        reply = send_request(endpoint, request, timeout)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 1) from exc
+    if not reply.get("ok"):
+        raise _fail(str(reply.get("error", reply)), 1)
+    typer.echo(f"automatic: {' '.join(reply['auto'])}  (state {reply['state']})")
+
+
 @identify_app.command("thrust")
 def identify_thrust(
     csv: Annotated[Path, typer.Argument(help="CSV of thrust-stand measurements.")],

@@ -420,6 +420,8 @@ class TelemetryConfig(_Model):
     enabled: bool = True
     endpoint: str = "tcp://127.0.0.1:5556"  # loopback by default; bind to * to serve the lab
     rate_hz: float = Field(20.0, gt=0, le=100.0)  # enough for a live view, light on the loop
+    control_endpoint: str | None = "tcp://127.0.0.1:5557"
+    # REP socket for run-time requests (`gs channels`); loopback only by default, null disables
 
 
 class LoggingConfig(_Model):

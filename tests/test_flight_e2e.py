@@ -21,6 +21,7 @@ from groundstation.loop.daemon import FlightDaemon, FlightSummary
 from groundstation.loop.recorder import read_flight
 from groundstation.loop.supervisor import State
 from groundstation.telemetry.client import TelemetryClient
+from groundstation.telemetry.control import send_request
 from sim_device.realtime import SimDeviceThread
 
 REPO = Path(__file__).resolve().parents[1]
@@ -37,6 +38,7 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {
         "trajectory.name": "hover", "vicon.port": free_udp_port(),
         "telemetry.endpoint": "tcp://127.0.0.1:*", "logging.flight_log_dir": str(tmp_path),
+        "telemetry.control_endpoint": "tcp://127.0.0.1:*",
         "sim.truth_file": str(tmp_path / "truth.npz"),
     })
     with SimDeviceThread(cfg) as device:
@@ -50,14 +52,23 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
         client = TelemetryClient(daemon.telemetry_endpoint)
         try:
             topics: dict[str, dict[str, object]] = {}
-            for _ in range(200):  # bounded: telemetry arrives at 20 Hz
+            for _ in range(400):  # bounded: telemetry arrives at 20 Hz
                 msg = client.receive(timeout=0.1)
                 if msg is not None:
                     topics[msg[0]] = msg[1]
-                if {"state", "health"} <= topics.keys():
+                if {"state", "health"} <= topics.keys() and \
+                        topics["state"]["supervisor"]["name"] == "TRACK":  # type: ignore[index]
                     break
         finally:
             client.close()
+        # While tracking, hand yaw to the pilot and back over the control socket
+        # (what `gs channels` does).
+        assert daemon.control_endpoint is not None
+        handed = send_request(daemon.control_endpoint,
+                              {"request": "channels", "auto": ["pitch", "roll", "thrust"]})
+        time.sleep(0.5)
+        back = send_request(daemon.control_endpoint,
+                            {"request": "channels", "auto": ["pitch", "roll", "yaw", "thrust"]})
         runner.join(60.0)
         assert not runner.is_alive()
         # Keep the lab running past the command link's delay and the 100 ms watchdog so
@@ -65,6 +76,8 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
         time.sleep(0.3)
     summary = out["s"]
     assert {"state", "health"} <= topics.keys()
+    assert handed == {"ok": True, "auto": ["pitch", "roll", "thrust"], "state": "TRACK"}
+    assert back == {"ok": True, "auto": ["pitch", "roll", "yaw", "thrust"], "state": "TRACK"}
     assert topics["state"]["supervisor"]["name"] in {s.name for s in State}  # type: ignore[index]
 
     # Took off, hovered, landed and handed back; exit code 0 for `gs fly`.
@@ -86,3 +99,10 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     assert "sim:" in config_text and meta["version"]
     assert np.all(np.diff(rows["t"]) > 0)
     assert summary.commands_sent > 0.4 * summary.ticks  # 50 Hz commands on 100 Hz ticks
+    # The handover reached the wire: about 0.5 s of COMMANDs without the yaw bit (25 at
+    # 50 Hz; the bound leaves room for a loaded machine), then all four channels again.
+    yaw_manual = (rows["cmd_mask"] == 0b1011) & rows["cmd_sent"]
+    assert 10 <= yaw_manual.sum() <= 100, yaw_manual.sum()
+    assert np.all(rows["state"][yaw_manual] == int(State.TRACK))
+    sent_after = np.flatnonzero(rows["cmd_sent"][np.flatnonzero(yaw_manual)[-1] + 1:])
+    assert rows["cmd_mask"][np.flatnonzero(yaw_manual)[-1] + 1 + sent_after[0]] == 0xF

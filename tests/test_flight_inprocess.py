@@ -13,10 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.asctec.messages import CHANNELS
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
 from groundstation.loop.inprocess import Event, FlightResult, InProcessFlight, fly_in_process
 from groundstation.loop.recorder import FlightRecorder, read_flight
 from groundstation.loop.supervisor import State
+from groundstation.types import Sticks
 from sim_device.lab import VirtualLab
 
 REPO = Path(__file__).resolve().parents[1]
@@ -179,3 +181,38 @@ def test_trace_truth_is_stamped_with_its_own_time() -> None:
     result = fly_in_process(sim_config(), duration_s=2.0, max_time_s=40.0)
     lead = result.trace["true_t"] - result.trace["t"]
     assert lead.min() >= -1e-9 and lead.max() <= 0.0101  # at most one DATA period newer
+
+
+def test_channels_handed_to_the_pilot_and_back_at_run_time(tmp_path: Path) -> None:
+    """Thesis Ch. 1.2: fly some channels automatically, leave the others to the pilot.
+    Yaw goes to the pilot at 9 s (cleared from the mask at once, the pilot's stick sent)
+    and comes back at 11 s, starting from exactly the pilot's stick (bumpless), then
+    blending to the controller's over serial.handover_blend_s (1 s)."""
+    pilot = Sticks(yaw=150)  # a slow yaw the pilot holds throughout
+
+    def give_yaw(f: InProcessFlight) -> None:
+        f.lab.set_pilot(pilot)
+        f.core.set_auto_channels(["pitch", "roll", "thrust"])
+
+    result = run_logged(sim_config(**{"trajectory.name": "hover"}), tmp_path, 8.0, [
+        (9.0, give_yaw), (11.0, lambda f: f.core.set_auto_channels(CHANNELS))])
+    assert result.final_state is State.DONE and on_the_ground(result)
+    (log,) = tmp_path.iterdir()
+    rows, _, _ = read_flight(log)
+    track = rows["state"] == int(State.TRACK)
+    manual = track & (rows["t"] > 9.05) & (rows["t"] < 11.0)
+    assert manual.sum() > 150
+    assert np.all(rows["cmd_mask"][manual] == 0b1011)  # yaw bit (4) clear
+    assert np.all(rows["cmd_yaw"][manual] == 150)  # the pilot's stick goes out
+    back = np.flatnonzero(track & (rows["t"] > 11.0) & (rows["cmd_mask"] == 0xF))
+    assert back.size > 150
+    first = back[0]
+    assert rows["cmd_mask"][first - 1] == 0b1011
+    assert rows["cmd_yaw"][first] == 150  # bumpless: starts from the pilot's value
+    assert rows["ctrl_yaw"][first] != 150  # ... which is not the controller's
+    half = back[50]  # 0.5 s later: half of the offset is left
+    offset = 150 - int(rows["ctrl_yaw"][first])
+    expect = rows["ctrl_yaw"][half] + offset * (1.0 - (rows["t"][half] - rows["t"][first]))
+    assert abs(int(rows["cmd_yaw"][half]) - expect) <= 1.0
+    after = back[back > first + 110]  # blend over: the controller's value goes out
+    np.testing.assert_array_equal(rows["cmd_yaw"][after], rows["ctrl_yaw"][after])

@@ -143,6 +143,7 @@ def run_real_time(scenario: Scenario, base: GroundStationConfig, workdir: Path) 
     truth = d / "truth.npz"
     cfg = apply_overrides(scenario_config(scenario, base), {
         "vicon.port": free_udp_port(), "telemetry.enabled": False,
+        "telemetry.control_endpoint": None,
         "logging.flight_log_dir": str(d), "sim.truth_file": str(truth)})
     config_file = d / "config.yaml"
     config_file.write_text(dump_config(cfg), encoding="utf-8")

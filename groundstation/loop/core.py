@@ -127,8 +127,14 @@ class FlightCore:
         """The supervisor's state."""
         return self.supervisor.state
 
+    @property
+    def auto_channels(self) -> tuple[Channel, ...]:
+        """The channels the ground station controls while it commands the vehicle."""
+        return self._auto
+
     def set_auto_channels(self, channels: Sequence[Channel]) -> None:
-        """Change at run time which channels the ground station controls (bumpless)."""
+        """Change at run time which channels the ground station controls (bumpless:
+        a channel taken from the pilot blends in from the pilot's stick)."""
         self._auto = tuple(channels)
         if self.supervisor.commanding:
             self.handover.set_auto(self._auto)

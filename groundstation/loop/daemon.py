@@ -48,7 +48,7 @@ import numpy as np
 import structlog
 
 from groundstation.asctec.link import SerialLink
-from groundstation.asctec.messages import ConfigMsg
+from groundstation.asctec.messages import CHANNELS, ConfigMsg
 from groundstation.config import GroundStationConfig, dump_config
 from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
@@ -61,6 +61,7 @@ from groundstation.loop.signals import on_stop_signals
 from groundstation.loop.supervisor import State, Transition
 from groundstation.loop.ticklog import TickLogger
 from groundstation.loop.timing import TimingHistogram
+from groundstation.telemetry.control import ControlServer, Reply, Request
 from groundstation.telemetry.publisher import TelemetryPublisher
 from groundstation.telemetry.schema import health_payload, state_payload
 from groundstation.types import Pose
@@ -147,6 +148,8 @@ class FlightDaemon:
         self.log_dir = ""
         self.telemetry_endpoint: str | None = None
         """The bound telemetry endpoint once :meth:`run` has started (``*`` ports resolved)."""
+        self.control_endpoint: str | None = None
+        """The bound control endpoint (``gs channels``) once :meth:`run` has started."""
         self.ready = threading.Event()
         """Set once every resource is open and the loop is about to start."""
 
@@ -178,6 +181,9 @@ class FlightDaemon:
             telemetry = TelemetryPublisher.from_config(cfg.telemetry)
             stack.callback(telemetry.close)
             self.telemetry_endpoint = telemetry.endpoint
+            control = ControlServer.from_config(cfg.telemetry)
+            stack.callback(control.close)
+            self.control_endpoint = control.endpoint
             stack.enter_context(on_stop_signals(self._on_signal))
             stack.enter_context(cpu_latency_request(cfg.realtime.cpu_dma_latency_us))
             stack.enter_context(switch_interval(cfg.realtime.switch_interval_ms / 1000.0))
@@ -186,12 +192,13 @@ class FlightDaemon:
             self.ready.set()
             log.info("flight starting", port=cfg.serial.port, vicon_port=cfg.vicon.port,
                      log=self.log_dir, controller=cfg.controller.type)
-            self._loop(link, vicon, recorder, telemetry, notifier)
+            self._loop(link, vicon, recorder, telemetry, control, notifier)
         return self._summary()
 
     # ------------------------------------------------------------------ the loop
     def _loop(self, link: SerialLink, vicon: ViconClient, recorder: FlightRecorder,
-              telemetry: TelemetryPublisher, notifier: SdNotifier) -> None:
+              telemetry: TelemetryPublisher, control: ControlServer,
+              notifier: SdNotifier) -> None:
         core = self.core
         ticklog = TickLogger(recorder)
         wd_interval = notifier.watchdog_interval()
@@ -231,6 +238,7 @@ class FlightDaemon:
             ticklog.record(start, rx.msg if rx is not None else None, imu, poses, result,
                            compute=compute, jitter=start - scheduled, latency=latency)
             telemetry.maybe_publish(start, partial(self._snapshot, result, link, vicon))
+            control.poll(self.handle_request)
             if wd_interval is not None and start >= next_wd:
                 notifier.watchdog()
                 next_wd = start + wd_interval / 2
@@ -252,6 +260,30 @@ class FlightDaemon:
             s.track_sq += err * err
             s.track_n += 1
             s.track_max = max(s.track_max, err)
+
+    def handle_request(self, request: Request) -> Reply:
+        """Answer one run-time request (see :mod:`groundstation.telemetry.control`).
+
+        ``channels`` with ``auto`` (a non-empty list of channel names) hands exactly
+        those channels to the controller from the next COMMAND, bumpless; the rest go
+        to the pilot at once. An empty set is refused: handing everything back is
+        the pilot's serial-enable switch (or a stop), which the supervisor follows.
+        """
+        if request.get("request") != "channels":
+            return {"ok": False, "error": f"unknown request {request.get('request')!r} "
+                                          "(known: 'channels')"}
+        core = self.core
+        if "auto" in request:
+            auto = request["auto"]
+            if not isinstance(auto, list) or not auto or \
+                    any(c not in CHANNELS for c in auto) or len(set(auto)) != len(auto):
+                return {"ok": False, "error": f"'auto' must list one or more of {list(CHANNELS)} "
+                                              f"once each, got {auto!r}"}
+            core.set_auto_channels(auto)
+            log.info("channels", auto=auto, state=core.state.name)
+        auto_now = core.auto_channels
+        return {"ok": True, "auto": [c for c in CHANNELS if c in auto_now],
+                "state": core.state.name}
 
     def _snapshot(self, result: TickResult, link: SerialLink, vicon: ViconClient
                   ) -> dict[str, dict[str, object]]:
