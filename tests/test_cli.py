@@ -1,14 +1,17 @@
-"""The `gs` commands that wrap the evaluation, export and replay, end to end through typer."""
+"""The `gs` commands that wrap the evaluation, export, replay and the control socket, end to
+end through typer."""
 
 from __future__ import annotations
 
 import json
+import threading
 from pathlib import Path
 
 import numpy as np
 from typer.testing import CliRunner
 
 from groundstation.cli import app
+from groundstation.telemetry.control import ControlServer
 
 REPO = Path(__file__).resolve().parents[1]
 runner = CliRunner()
@@ -52,3 +55,39 @@ def test_report_and_export_of_a_recorded_flight(tmp_path: Path) -> None:
     assert res.exit_code == 0, res.output
     table = np.genfromtxt(csv, delimiter=",", names=True)
     assert len(table) > 500 and "est_position_x" in table.dtype.names
+
+
+def test_channels_talks_to_the_control_socket() -> None:
+    seen: list[dict[str, object]] = []
+
+    def handler(request: dict[str, object]) -> dict[str, object]:
+        seen.append(request)
+        if request.get("auto") == ["elevator"]:
+            return {"ok": False, "error": "'auto' must list one or more of ..."}
+        return {"ok": True, "auto": ["thrust"], "state": "TRACK"}
+
+    with ControlServer("tcp://127.0.0.1:*") as server:
+        assert server.endpoint is not None
+        stop = threading.Event()
+
+        def serve() -> None:
+            while not stop.wait(0.001):
+                server.poll(handler)
+
+        thread = threading.Thread(target=serve, daemon=True)
+        thread.start()
+        try:
+            ok = runner.invoke(app, ["channels", "thrust", "--endpoint", server.endpoint])
+            bad = runner.invoke(app, ["channels", "elevator", "--endpoint", server.endpoint])
+        finally:
+            stop.set()
+            thread.join(5.0)
+    assert ok.exit_code == 0 and "automatic: thrust  (state TRACK)" in ok.output
+    assert bad.exit_code == 1 and "must list one or more" in bad.output
+    assert seen == [{"request": "channels", "auto": ["thrust"]},
+                    {"request": "channels", "auto": ["elevator"]}]
+
+
+def test_channels_without_a_daemon_fails_clearly() -> None:
+    res = runner.invoke(app, ["channels", "--endpoint", "tcp://127.0.0.1:9", "--timeout", "0.2"])
+    assert res.exit_code == 1 and "no reply from tcp://127.0.0.1:9 within 0.2 s" in res.output
