@@ -7,6 +7,8 @@ from typing import Any, Self
 
 import zmq
 
+from groundstation.errors import TelemetryError
+
 
 class ZmqOwner:
     """Owns at most one zmq socket and, unless one was shared, its context.
@@ -21,6 +23,27 @@ class ZmqOwner:
         """Use ``shared``, or create (and own) a context if one is ``needed``."""
         self._own_context = shared is None and needed
         self._context: zmq.Context[Any] | None = zmq.Context() if self._own_context else shared
+
+    def _bind_socket(self, kind: int, endpoint: str, what: str,
+                     options: dict[int, int] | None = None) -> str:
+        """Create a socket of ``kind`` with ``options`` (LINGER 0 always), bind it to
+        ``endpoint`` and keep it as :attr:`_socket`; returns the bound endpoint with the
+        actual port. On failure closes everything and raises TelemetryError naming
+        ``what`` and the endpoint."""
+        assert self._context is not None
+        sock = self._context.socket(kind)
+        try:
+            sock.setsockopt(zmq.LINGER, 0)
+            for option, value in (options or {}).items():
+                sock.setsockopt(option, value)
+            sock.bind(endpoint)
+            last = sock.getsockopt(zmq.LAST_ENDPOINT)
+        except zmq.ZMQError as exc:
+            sock.close(linger=0)
+            self._close_context()
+            raise TelemetryError(f"{what}: cannot bind {endpoint!r}: {exc}") from exc
+        self._socket = sock
+        return last.decode() if isinstance(last, bytes) else str(last)
 
     def _close_context(self) -> None:
         if self._own_context and self._context is not None:

@@ -54,20 +54,8 @@ class ControlServer(ZmqOwner):
         """Requests that were not a JSON object or that the handler failed on."""
         self._open_context(context, needed=endpoint is not None)
         self._socket: zmq.Socket[Any] | None = None
-        if endpoint is None:
-            return
-        assert self._context is not None
-        sock = self._context.socket(zmq.REP)
-        try:
-            sock.setsockopt(zmq.LINGER, 0)
-            sock.bind(endpoint)
-            last = sock.getsockopt(zmq.LAST_ENDPOINT)
-        except zmq.ZMQError as exc:
-            sock.close(linger=0)
-            self._close_context()
-            raise TelemetryError(f"control: cannot bind {endpoint!r}: {exc}") from exc
-        self._socket = sock
-        self.endpoint = last.decode() if isinstance(last, bytes) else str(last)
+        if endpoint is not None:
+            self.endpoint = self._bind_socket(zmq.REP, endpoint, "control")
 
     @classmethod
     def from_config(cls, config: TelemetryConfig,

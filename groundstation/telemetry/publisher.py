@@ -21,7 +21,6 @@ import structlog
 import zmq
 
 from groundstation.config import TelemetryConfig
-from groundstation.errors import TelemetryError
 from groundstation.telemetry._zmqowner import ZmqOwner
 from groundstation.telemetry.schema import SCHEMA_VERSION, TOPIC_HEALTH, encode
 
@@ -65,23 +64,8 @@ class TelemetryPublisher(ZmqOwner):
         self._open_context(context, needed=endpoint is not None)
         self._socket: zmq.Socket[Any] | None = None
         if endpoint is not None:
-            self._bind(endpoint, sndhwm)
-
-    def _bind(self, endpoint: str, sndhwm: int) -> None:
-        assert self._context is not None
-        sock = self._context.socket(zmq.PUB)
-        try:
-            sock.setsockopt(zmq.LINGER, 0)
-            sock.setsockopt(zmq.SNDHWM, sndhwm)
-            sock.setsockopt(zmq.XPUB_NODROP, 1)
-            sock.bind(endpoint)
-            last = sock.getsockopt(zmq.LAST_ENDPOINT)
-        except zmq.ZMQError as exc:
-            sock.close(linger=0)
-            self._close_context()
-            raise TelemetryError(f"telemetry: cannot bind {endpoint!r}: {exc}") from exc
-        self._socket = sock
-        self.endpoint = last.decode() if isinstance(last, bytes) else str(last)
+            self.endpoint = self._bind_socket(
+                zmq.PUB, endpoint, "telemetry", {zmq.SNDHWM: sndhwm, zmq.XPUB_NODROP: 1})
 
     @classmethod
     def from_config(
