@@ -229,15 +229,9 @@ class Ekf:
             return self.estimate()
         x = self._x.copy()
         g0, a0 = self._gyro, self._acc
-        if dt <= self.params.max_step:
-            propagate(x, g0, a0, imu.gyro, imu.acc, dt, self._g, x)
-        else:  # sub-steps exactly as _propagate_to, input linear in time
-            n = math.ceil(dt / self.params.max_step)
-            for i in range(1, n + 1):
-                f = i / n
-                g1, a1 = g0 + f * (imu.gyro - g0), a0 + f * (imu.acc - a0)
-                propagate(x, g0, a0, g1, a1, dt / n, self._g, x)
-                g0, a0 = g1, a1
+        for h, g1, a1 in self._substeps(dt, imu.gyro, imu.acc):  # as the filter steps
+            propagate(x, g0, a0, g1, a1, h, self._g, x)
+            g0, a0 = g1, a1
         return self._estimate_of(float(imu.t), x, imu.gyro)
 
     def _estimate_of(self, t: float, x: FloatArray, gyro: FloatArray) -> StateEstimate:
@@ -371,17 +365,24 @@ class Ekf:
     def _propagate_to(self, t: float, gyro: FloatArray, acc: FloatArray) -> None:
         """Integrate state and covariance from the filter time to ``t`` (input linear)."""
         dt_total = t - self._t
-        if 0.0 < dt_total <= self.params.max_step:
-            self._step(dt_total, gyro, acc)
-        elif dt_total > 0.0:  # a long gap: sub-step, input still linear in time
-            n = math.ceil(dt_total / self.params.max_step)
-            g0, a0 = self._gyro.copy(), self._acc.copy()
-            for i in range(1, n + 1):
-                f = i / n
-                self._step(dt_total / n, g0 + f * (gyro - g0), a0 + f * (acc - a0))
+        if dt_total > 0.0:
+            for h, g1, a1 in self._substeps(dt_total, gyro, acc):
+                self._step(h, g1, a1)
         self._t = t
         self._gyro[:] = gyro
         self._acc[:] = acc
+
+    def _substeps(self, dt: float, gyro: FloatArray, acc: FloatArray
+                  ) -> list[tuple[float, FloatArray, FloatArray]]:
+        """``(h, gyro_end, acc_end)`` per integration step over ``dt`` > 0 [s] from the
+        stored input to ``(gyro, acc)``: one step, or for a gap longer than ``max_step``
+        equal sub-steps with the input linear in time."""
+        if dt <= self.params.max_step:
+            return [(dt, gyro, acc)]
+        n = math.ceil(dt / self.params.max_step)
+        g0, a0 = self._gyro.copy(), self._acc.copy()
+        return [(dt / n, g0 + (i / n) * (gyro - g0), a0 + (i / n) * (acc - a0))
+                for i in range(1, n + 1)]
 
     def _step(self, dt: float, gyro1: FloatArray, acc1: FloatArray) -> None:
         """One prediction step of length ``dt`` from the stored input to ``(gyro1, acc1)``."""
