@@ -205,6 +205,13 @@ class VehicleConfig(_Model):
         default_factory=lambda: [1.09e-9, 5.17e-6, 9.74e-6, 3.62e-6], min_length=4, max_length=4
     )  # Table 6.1, q0..q3
     acc_saturation: PositiveFloat = 14.0  # Ch. 6.2: accelerometer saturates near 14 m/s^2
+    rate_loop_tau_s: PositiveFloat = 0.064
+    # on-board rate loop as a first-order lag: Fig. 3.8 rises (10-90 %) in 0.14 s = 2.2 tau.
+    # The controller design, the virtual lab and the evaluation all use this one value
+    command_delay_s: NonNegFloat = 0.02
+    # transport delay of a COMMAND (radio and firmware) before the vehicle applies it;
+    # Ch. 3.3.1 identified the rate gains "with a time delay" without printing it; 20 ms
+    # is one 50 Hz command period (XBee at 57600 baud, thesis App. A)
 
     @field_validator("k_rate", "gyro_scale", "acc_scale")
     @classmethod
@@ -294,8 +301,10 @@ class LqrConfig(_Model):
     # differences as the thesis did (eq. 9.22-9.26)
     velocity_filter: float = Field(0.5, ge=0.0, lt=1.0)
     # weight of the previous velocity when velocity_source is "samples", tuned
-    rate_loop_tau_s: PositiveFloat | None = None
-    # design on the model with the on-board rate-loop lag (Ch. 10.3); None = thesis model
+    design_model: Literal["rate-loop", "thesis"] = "rate-loop"
+    # rate-loop: design on the hover model with the rate-loop lag and the command delay
+    # (vehicle section), as the thesis concludes it must (Ch. 10.3, 12); thesis: its
+    # ideal-rate-loop model (Ch. 9)
 
     @field_validator("q_error", "r_input")
     @classmethod
@@ -331,12 +340,46 @@ class HinfConfig(_Model):
     noise_gain: PositiveFloat = 0.01  # k of W_n (eq. 10.9), tuned
 
 
-class ControllerConfig(_Model):
-    """Which controller flies and how it is tuned."""
+class LqrFfConfig(_Model):
+    """LQR with the feed-forward reference model (beyond the thesis, control/lqr_ff.py),
+    designed on the vehicle with its rate loop and command delay. Weights on e = x - x_ref."""
 
-    type: Literal["lqr-cv", "lqr-cp", "pid", "hinf"] = "lqr-cv"
-    # lqr-cv: constant-velocity reference model (the thesis's best, Ch. 11.3)
-    rate_hz: float = Field(100.0, ge=10.0, le=200.0)  # one step per DATA sample (100 Hz)
+    q_error: list[float] = Field(default_factory=lambda: [100.0, 100.0, 100.0, 20.0],
+                                 min_length=4, max_length=4)
+    # Q_e on [x, y, z, q3] errors [1/m^2, -]: ~0.8 Hz horizontal bandwidth; tuned for the
+    # worst case of `gs eval --perturb` (rate gains +-30 %, tau +-30 %, delay 5-30 ms)
+    r_input: list[float] = Field(default_factory=lambda: [1.0, 1.0, 1.0, 0.5],
+                                 min_length=4, max_length=4)
+    # R on [omega_x, omega_y, omega_z, F_z] [1/(rad/s)^2, 1/N^2], tuned with q_error
+    q_integral: list[float] = Field(default_factory=lambda: [20.0, 20.0, 20.0, 2.0],
+                                    min_length=4, max_length=4)
+    # weights on the integrated [x, y, z, q3] errors: zero steady-state error under a
+    # thrust-map error, a wrong mass or battery droop (issue 13); 0 turns one off
+    integral_limit: PositiveFloat = 2.0  # anti-windup clamp on each integrated error [m s]
+
+    @field_validator("q_error", "r_input")
+    @classmethod
+    def _positive_weights(cls, value: list[float]) -> list[float]:
+        if any(not (w > 0 and math.isfinite(w)) for w in value):
+            raise ValueError("weights must be finite and positive (diagonal of a PD matrix)")
+        return value
+
+    @field_validator("q_integral")
+    @classmethod
+    def _nonnegative(cls, value: list[float]) -> list[float]:
+        if any(not (w >= 0 and math.isfinite(w)) for w in value):
+            raise ValueError("integral weights must be finite and >= 0")
+        return value
+
+
+class ControllerConfig(_Model):
+    """Which controller flies and how it is tuned. Every controller is designed at the
+    command period (1 / serial.command_rate_hz) and steps once per COMMAND."""
+
+    type: Literal["lqr-ff", "lqr-cv", "lqr-cp", "pid", "hinf"] = "lqr-ff"
+    # lqr-ff: feed-forward reference model (beyond the thesis; best in `gs eval`);
+    # lqr-cv / lqr-cp: the thesis's constant-velocity / constant-position models (Ch. 9, 11)
+    lqr_ff: LqrFfConfig = LqrFfConfig()
     lqr: LqrConfig = LqrConfig()
     pid: PidConfig = PidConfig()
     hinf: HinfConfig = HinfConfig()
@@ -352,7 +395,7 @@ class ControllerConfig(_Model):
 # --------------------------------------------------------------------------- trajectory
 TrajectoryName = Literal[
     "hover", "step-x", "step-y", "step-z", "square", "yz-rectangle", "low-hover",
-    "figure-eight", "waypoints",
+    "figure-eight", "yaw-turn", "waypoints",
 ]
 
 
@@ -368,6 +411,14 @@ class TrajectoryConfig(_Model):
     low_height_m: PositiveFloat = 0.02  # low-hover height, Ch. 11.4 (2 cm)
     corner_smoothing_s: NonNegFloat = 0.0  # 0 = sharp corners as in the thesis
     file: Path | None = None  # CSV of waypoints (t, x, y, z[, yaw]) for name 'waypoints'
+    yaw_deg: float | None = None
+    # heading to fly at [deg from north]; null keeps the heading the vehicle was placed at
+    # (a waypoint CSV's yaw column, when present, gives the heading instead)
+    yaw_turn_deg: float = 360.0  # 'yaw-turn': turn this far over period_s, holding position
+    shaping: Literal["min-jerk", "none"] = "min-jerk"
+    # min-jerk: make the reference flyable before flight (start and stop at rest, corners
+    # and velocity steps blended within the safety limits, path through the corners);
+    # none: the thesis's raw reference (sharp corners), for the Ch. 11 comparison
 
     @model_validator(mode="after")
     def _file(self) -> TrajectoryConfig:
@@ -394,6 +445,15 @@ class SafetyConfig(_Model):
     takeoff_speed_m_s: PositiveFloat = 0.5  # climb rate for take-off, tuned
     land_speed_m_s: PositiveFloat = 0.3  # descent rate when landing, tuned
     preflight_timeout_s: PositiveFloat = 10.0  # give up if checks do not pass in this time
+    takeoff_timeout_s: PositiveFloat = 20.0
+    # land if the take-off has not reached the trajectory's start in this time (a 1 m
+    # climb at 0.5 m/s takes ~4 s after the 1 s handover blend); tuned
+    trajectory_tilt_deg: PositiveFloat = 20.0
+    # most tilt a reference may ask for; the rest of max_tilt_deg is left to the feedback
+    max_speed_m_s: PositiveFloat = 1.5  # fastest reference speed accepted [m/s]
+    max_yaw_rate_deg_s: PositiveFloat = 90.0  # fastest heading change of a reference, tuned
+    volume_margin_m: NonNegFloat = 0.1
+    # a reference must stay this far inside volume_x/y/z (tracking error, braking room)
     gravity_check_deg: PositiveFloat = 10.0  # accel gravity vs Vicon attitude agreement
     on_signal: Literal["land", "handback"] = "land"  # what SIGINT/SIGTERM does
 
@@ -476,9 +536,14 @@ class SimConfig(_Model):
 
     seed: int = 1
     dt_s: float = Field(0.002, gt=0, le=0.01)  # 2 ms fixed step, issue 5 (rate loop, motors)
-    rate_loop_tau_s: NonNegFloat = 0.064
-    # first-order rate loop: 10-90 % rise 2.2 tau = 0.14 s (Fig. 3.8); 0 disables
-    command_delay_s: NonNegFloat = 0.02  # transport delay of the command link (Ch. 3.3.1)
+    # Where the simulated vehicle differs from the vehicle model (all off by default:
+    # the virtual lab is then the design model; `gs eval --perturb` draws them)
+    rate_loop_tau_s: NonNegFloat | None = None
+    # true rate-loop time constant; null = vehicle.rate_loop_tau_s; 0 = an ideal rate loop
+    command_delay_s: NonNegFloat | None = None  # true transport delay; null = the vehicle's
+    k_rate_scale: Vec3 = Field(default_factory=lambda: [1.0, 1.0, 1.0])
+    # true rate gains / vehicle.k_rate, per axis (1.3 = a 30 % stronger rate response)
+    mass_scale: PositiveFloat = 1.0  # true mass / vehicle.mass_kg
     motor_tau_s: NonNegFloat = 0.02
     # lift lag of motors and rotors; the thesis gives none, 20 ms is typical of the class
     battery_droop: float = Field(0.03, ge=0.0, lt=0.5)

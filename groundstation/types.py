@@ -69,7 +69,9 @@ class Reference:
     position : (3,) NED [m]
     velocity : (3,) NED [m/s]
     acceleration : (3,) NED [m/s^2] (zeros where not defined)
-    yaw : heading [rad] (the thesis controls q3; yaw = 2*asin(q3) near level)
+    yaw : heading [rad], 3-2-1 Euler psi (the thesis controls q3 = sin(yaw / 2) near level)
+    jerk : (3,) NED [m/s^3], the derivative of ``acceleration`` (zeros where not defined)
+    yaw_rate : d yaw / dt [rad/s]
     """
 
     t: float
@@ -77,6 +79,8 @@ class Reference:
     velocity: FloatArray
     acceleration: FloatArray = field(default_factory=lambda: np.zeros(3))
     yaw: float = 0.0
+    jerk: FloatArray = field(default_factory=lambda: np.zeros(3))
+    yaw_rate: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -292,7 +292,10 @@ class LabParams:
             dt=sim.dt_s, seed=sim.seed, plant=_plant_params(config, sim),
             imu=_imu_params(config, sim), vicon=_vicon_params(config, sim),
             link=LinkParams(baud=config.serial.baud, crc_profile=config.serial.crc_profile,
-                            command_delay=sim.command_delay_s, battery_mv=sim.battery_mv),
+                            command_delay=(config.vehicle.command_delay_s
+                                           if sim.command_delay_s is None
+                                           else sim.command_delay_s),
+                            battery_mv=sim.battery_mv),
             faults=FaultParams(corruption_rate=f.corruption_rate, drop_rate=f.drop_rate,
                                stall_at=f.stall_at_s, stall_duration=f.stall_duration_s,
                                burst_period=f.burst_delay_s, data_delay=f.delay_s),
@@ -303,10 +306,12 @@ class LabParams:
 
 def _plant_params(config: GroundStationConfig, sim: SimConfig) -> PlantParams:
     veh = config.vehicle
+    k_rate = tuple(k * s for k, s in zip(veh.k_rate, sim.k_rate_scale, strict=True))
+    tau = veh.rate_loop_tau_s if sim.rate_loop_tau_s is None else sim.rate_loop_tau_s
     return PlantParams(
-        mass=veh.mass_kg, g=veh.gravity, k_rate=_vec3(veh.k_rate),
+        mass=veh.mass_kg * sim.mass_scale, g=veh.gravity, k_rate=_vec3(k_rate),
         thrust_poly=tuple(veh.thrust_poly), inflow=veh.induced_inflow,
-        rate_tau=sim.rate_loop_tau_s, thrust_tau=sim.motor_tau_s, thrust_scale=sim.thrust_scale,
+        rate_tau=tau, thrust_tau=sim.motor_tau_s, thrust_scale=sim.thrust_scale,
         battery_droop=sim.battery_droop, battery_droop_time=sim.battery_droop_time_s,
         initial_position=_vec3(sim.initial_position),
         initial_yaw=math.radians(sim.initial_yaw_deg),

@@ -119,6 +119,14 @@ class ChannelHandover:
             ctrl=self.mask,
         )
 
+    def blending(self, t: float) -> bool:
+        """True while a channel handed to the controller still sends (part of) the pilot's
+        offset at ``t``, or has not yet sent its first COMMAND."""
+        if self._pending:
+            return True
+        return any(self._blend_time > 0.0 and t - t0 < self._blend_time
+                   for t0, _offset in self._offsets.values())
+
     def _blend(self, channel: Channel, t: float) -> float:
         """The part of the handover offset still applied at ``t`` (linear decay)."""
         entry = self._offsets.get(channel)

@@ -7,10 +7,24 @@ A controller is pure computation: the loop hands it the time, the latest
 ``F_z = F_lift + m g`` [N], 0 in hover, negative to climb). It owns no clock and
 no thread; gains are computed at construction and :meth:`Controller.step` is
 lean (no validation, as little allocation as the output records allow).
+
+The flight core calls :meth:`Controller.step` once per COMMAND actually sent (the
+controllers are designed at that period), hands it the reference ``lead_s``
+seconds ahead as a preview when it asks for one, and then tells it with
+:meth:`Controller.sent` what went out after the channel handover.
+
+Heading invariance: the quadrotor's dynamics do not depend on its heading, so
+every controller works in the *heading frame* (:class:`HeadingFrame`): earth
+axes turned by the vehicle's own heading about the vertical. Horizontal errors,
+velocities and the tilt are expressed there and the heading error is wrapped to
+(-pi, pi], so a gain designed at heading 0 (the thesis's linearisation at
+``q = [1, 0, 0, 0]``) is right at every heading and while the heading turns.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -23,10 +37,25 @@ REDUCED_STATES = ("x", "y", "z", "q1", "q2", "q3", "v1", "v2", "v3")
 
 @runtime_checkable
 class Controller(Protocol):
-    """What the flight loop calls once per control period."""
+    """What the flight loop calls once per COMMAND period.
 
-    def step(self, t: float, estimate: StateEstimate, reference: Reference) -> ControlOutput:
-        """Control output for the state ``estimate`` at time ``t`` [s] given ``reference``."""
+    lead_s : how far ahead of the tick [s] the controller wants the reference as a
+        preview (its feed-forward looks ahead by the rate-loop lag and the link
+        delay); 0 for a controller without preview.
+    """
+
+    lead_s: float
+
+    def step(self, t: float, estimate: StateEstimate, reference: Reference,
+             preview: Reference | None = None) -> ControlOutput:
+        """Control output for the state ``estimate`` at time ``t`` [s] given ``reference``
+        (the reference now) and ``preview`` (the reference ``lead_s`` later, or None)."""
+        ...
+
+    def sent(self, output: ControlOutput, automatic: bool) -> None:
+        """What the vehicle was sent after the last :meth:`step` (after the channel
+        handover and the stick conversion, in physical units); ``automatic``: every
+        channel was under the controller's own control (no pilot, no handover blend)."""
         ...
 
     def reset(self) -> None:
@@ -41,51 +70,156 @@ class NullController:
     tests of the loop's plumbing and shows the minimum a controller provides.
     """
 
+    lead_s = 0.0
+
     def __init__(self) -> None:
         self._omega = np.zeros(3)
 
-    def step(self, t: float, estimate: StateEstimate, reference: Reference) -> ControlOutput:
+    def step(self, t: float, estimate: StateEstimate, reference: Reference,
+             preview: Reference | None = None) -> ControlOutput:
         """Zero rates and ``F_z = 0`` (lift equals weight, eq. 4.14)."""
         return ControlOutput(omega=self._omega.copy(), f_z=0.0)
+
+    def sent(self, output: ControlOutput, automatic: bool) -> None:
+        """Nothing to learn from."""
 
     def reset(self) -> None:
         """Nothing to forget."""
 
 
-def fill_reduced_state(estimate: StateEstimate, out: FloatArray) -> FloatArray:
-    """Write the reduced hover state ``[P, q1, q2, q3, v]`` (9,) of ``estimate`` into ``out``.
+def wrap_angle(angle: float) -> float:
+    """``angle`` [rad] wrapped to (-pi, pi]."""
+    a = math.remainder(angle, math.tau)  # in [-pi, pi]
+    return math.pi if a == -math.pi else a
 
-    The quaternion sign is chosen with ``q0 >= 0`` so that the small-angle
-    components ``q1..q3`` describe the attitude near hover (``q`` and ``-q`` are
-    the same attitude). The velocity is rotated to earth axes, ``v = eCb bv``:
-    the linear model's ``P_dot = v`` (eq. 4.8) then holds exactly, not only at
-    hover (a tilted vehicle flying level would otherwise appear to climb or
-    sink by ``sin(tilt) |v|``); at hover it equals ``bv``, the thesis's state.
+
+def heading_of(q: FloatArray) -> float:
+    """Heading [rad] of the scalar-first attitude ``q`` (3-2-1 Euler psi, ``R(q) = eCb``)."""
+    q0, q1, q2, q3 = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+    return math.atan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
+
+
+class HeadingFrame:
+    """Earth axes turned about the vertical by the vehicle's heading (see the module doc).
+
+    :meth:`update` takes an estimate and fills, in this frame, the quantities the
+    linear hover model is written in: ``tilt`` ``(q1, q2)`` of ``q_h = q_z(psi)* ⊗ q``
+    (the attitude without its heading: ``q_h1 ~ phi / 2``, ``q_h2 ~ theta / 2``) and
+    the velocity ``velocity`` (3,) [m/s] (earth axes turned by ``-psi``).
+    :meth:`to_heading` turns any earth-axis vector the same way. ``yaw`` [rad],
+    ``cos``, ``sin``: the heading and its cosine and sine.
+    """
+
+    __slots__ = ("cos", "sin", "tilt", "velocity", "yaw")
+
+    def __init__(self) -> None:
+        self.yaw = 0.0
+        self.cos = 1.0
+        self.sin = 0.0
+        self.tilt = (0.0, 0.0)
+        self.velocity = np.zeros(3)
+
+    def update(self, estimate: StateEstimate) -> None:
+        """Heading, tilt and heading-frame velocity of ``estimate``."""
+        q0, q1, q2, q3 = (float(x) for x in estimate.quaternion)
+        if q0 < 0.0:
+            q0, q1, q2, q3 = -q0, -q1, -q2, -q3
+        psi = math.atan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
+        ch, sh = math.cos(0.5 * psi), math.sin(0.5 * psi)
+        self.yaw = psi
+        self.cos, self.sin = math.cos(psi), math.sin(psi)
+        self.tilt = (ch * q1 + sh * q2, ch * q2 - sh * q1)  # vector part of q_z(-psi) ⊗ q
+        vx, vy, vz = (float(x) for x in estimate.velocity_body)
+        # eCb v (eq. 2.20 read as body -> earth), then turned by -psi about the vertical
+        n = ((q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) * vx + 2 * (q1 * q2 - q0 * q3) * vy
+             + 2 * (q1 * q3 + q0 * q2) * vz)
+        e = (2 * (q1 * q2 + q0 * q3) * vx + (q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3) * vy
+             + 2 * (q2 * q3 - q0 * q1) * vz)
+        d = (2 * (q1 * q3 - q0 * q2) * vx + 2 * (q2 * q3 + q0 * q1) * vy
+             + (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) * vz)
+        v = self.velocity
+        v[0] = self.cos * n + self.sin * e
+        v[1] = -self.sin * n + self.cos * e
+        v[2] = d
+
+    def to_heading(self, x: float, y: float) -> tuple[float, float]:
+        """The horizontal earth-axis vector ``(x, y)`` (north, east) in the heading frame."""
+        return self.cos * x + self.sin * y, -self.sin * x + self.cos * y
+
+    def to_earth(self, x: float, y: float) -> tuple[float, float]:
+        """The heading-frame vector ``(x, y)`` (forward, right) in earth axes."""
+        return self.cos * x - self.sin * y, self.sin * x + self.cos * y
+
+    def yaw_error(self, yaw_ref: float) -> float:
+        """``sin(wrap(psi - yaw_ref) / 2)``: the heading error as the q3 of the hover
+        model (eq. 9.15 controls q3), continuous through +-180 degrees."""
+        return math.sin(0.5 * wrap_angle(self.yaw - yaw_ref))
+
+
+class OutputIntegrator:
+    """Integrated output errors ``r - y`` of ``[x, y, z, heading]`` for an LQR with integral
+    action, kept with x and y in *earth* axes and handed to the gain in the heading frame.
+
+    An integrator holds the force that cancels a constant disturbance; a disturbance
+    fixed in the lab (a draught, a biased position) stays fixed while the vehicle
+    turns, so the integral must not turn with the heading frame.
+
+    outputs : which of the four outputs have an integrator (indices 0..3)
+    dt : period [s]; limit : clamp on each integral [m s, s]
+    """
+
+    def __init__(self, outputs: Sequence[int], dt: float, limit: float) -> None:
+        self._outputs = tuple(int(k) for k in outputs)
+        self._dt = dt
+        self._limit = limit
+        self.earth = np.zeros(4)
+
+    def reset(self) -> None:
+        """Zero every integral."""
+        self.earth[:] = 0.0
+
+    def update(self, frame: HeadingFrame, state: FloatArray, out: FloatArray,
+               undo: bool = False) -> None:
+        """Integrate the errors of the heading-frame ``state`` (``[x, y, z]`` relative to
+        the reference in rows 0..2, heading error in row 5, as
+        :func:`fill_heading_state` writes it) and write the integrals of the chosen
+        outputs into ``out`` in the heading frame. ``undo`` takes the step back
+        (conditional integration: hold while the output saturates)."""
+        if not self._outputs:
+            return
+        step = self._dt if undo else -self._dt
+        ie = self.earth
+        ex, ey = frame.to_earth(float(state[0]), float(state[1]))
+        ie[0] += step * ex
+        ie[1] += step * ey
+        ie[2] += step * float(state[2])
+        ie[3] += step * float(state[5])
+        np.clip(ie, -self._limit, self._limit, out=ie)
+        hx, hy = frame.to_heading(float(ie[0]), float(ie[1]))
+        in_frame = (hx, hy, float(ie[2]), float(ie[3]))
+        for k, idx in enumerate(self._outputs):
+            out[k] = in_frame[idx]
+
+
+def fill_heading_state(frame: HeadingFrame, estimate: StateEstimate, reference: Reference,
+                       out: FloatArray) -> FloatArray:
+    """The reduced hover state ``[P, q1, q2, q3, v]`` (9,) of ``estimate`` *relative to*
+    ``reference``, in the heading frame ``frame`` (updated from ``estimate`` first).
+
+    ``P`` is the position minus the reference position, turned into the heading
+    frame; ``q1, q2`` the tilt; ``q3`` the wrapped heading error
+    (:meth:`HeadingFrame.yaw_error`); ``v`` the heading-frame velocity. The
+    reference's own outputs ``[x, y, z, q3]`` are then 0. Every LQR gain here is
+    invariant under a common shift of the state and the reference positions (the
+    positions are pure integrators of the velocity), so this equals the thesis's
+    absolute-coordinate law at heading 0 and turns it with the vehicle at any other.
     ``out`` must be a float array of length >= 9; returns it.
     """
-    q0, q1, q2, q3 = estimate.quaternion
-    sign = 1.0 if q0 >= 0.0 else -1.0
-    out[0:3] = estimate.position
-    out[3] = sign * q1
-    out[4] = sign * q2
-    out[5] = sign * q3
-    vx, vy, vz = estimate.velocity_body
-    # eCb @ v (eq. 2.20 read as body -> earth, see groundstation.model.quaternion)
-    out[6] = ((q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) * vx + 2 * (q1 * q2 - q0 * q3) * vy
-              + 2 * (q1 * q3 + q0 * q2) * vz)
-    out[7] = (2 * (q1 * q2 + q0 * q3) * vx + (q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3) * vy
-              + 2 * (q2 * q3 - q0 * q1) * vz)
-    out[8] = (2 * (q1 * q3 - q0 * q2) * vx + 2 * (q2 * q3 + q0 * q1) * vy
-              + (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) * vz)
-    return out
-
-
-def reference_outputs(reference: Reference, out: FloatArray) -> FloatArray:
-    """Write the controlled outputs ``[x, y, z, q3]`` (4,) of ``reference`` into ``out``.
-
-    ``q3 = sin(yaw / 2)`` is the z component of a pure heading quaternion
-    (eq. 9.15 controls ``q3``).
-    """
-    out[0:3] = reference.position
-    out[3] = np.sin(0.5 * reference.yaw)
+    frame.update(estimate)
+    p, r = estimate.position, reference.position
+    out[0], out[1] = frame.to_heading(float(p[0] - r[0]), float(p[1] - r[1]))
+    out[2] = float(p[2] - r[2])
+    out[3], out[4] = frame.tilt
+    out[5] = frame.yaw_error(reference.yaw)
+    out[6:9] = frame.velocity
     return out

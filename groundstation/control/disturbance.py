@@ -55,13 +55,16 @@ class DisturbanceObserver:
         self.estimate[:] = 0.0
         self._have_prev = False
 
-    def update(self, x: FloatArray, u_applied_prev: FloatArray | None = None) -> FloatArray:
+    def update(self, x: FloatArray, u_applied_prev: FloatArray | None = None, *,
+               learn: bool = True) -> FloatArray:
         """Correct the estimate with the new state ``x`` (n,); returns the estimate (3,).
 
         ``u_applied_prev`` is the command applied since the previous call
-        (default: the one given to :meth:`commit`).
+        (default: the one given to :meth:`commit`). ``learn=False`` keeps the
+        estimate (the input since the previous call is not known: the pilot had a
+        channel, or a handover was blending) and only remembers ``x``.
         """
-        if self._have_prev:
+        if self._have_prev and learn:
             u = self._u_prev if u_applied_prev is None else u_applied_prev
             pred = self._pred
             np.dot(self._Phi_v, self._x_prev, out=pred)

@@ -19,14 +19,13 @@ from typing import Literal
 
 import numpy as np
 
-from groundstation.control.base import fill_reduced_state, reference_outputs
+from groundstation.control.base import HeadingFrame, fill_heading_state
 from groundstation.control.hinf_design import (
     HinfWeights,
     plant_model,
     solve_lmi,
     standard_problem,
 )
-from groundstation.control.lqr import H_OUTPUTS
 from groundstation.control.sticks import CommandLimits, StickParams
 from groundstation.errors import ControlError
 from groundstation.model import QuadrotorParams
@@ -117,34 +116,33 @@ def synthesise_hinf(
 
 
 class HinfController:
-    """Fly a stored H-infinity gain: ``u = F_s x_s + F_r r``, saturated.
+    """Fly a stored H-infinity gain: ``u = F_s (x_s - T r)``, saturated.
 
     gain : a :class:`HinfGain` (e.g. from :func:`load_hinf_gain`); params : the
     vehicle (for the default saturation limits); limits : output saturation.
-    reference_gain : "dc" (default) replaces the synthesised ``F_r`` by
-    ``-F_s T`` (T puts r on the x, y, z, q3 states), the static prefilter that
-    makes hover at the reference an equilibrium: the standard problem models the
-    reference as the output of the low-pass ``W_r`` that decays to zero, so the
-    synthesised ``F_r`` only follows a fraction of a constant reference (about
-    0.66 for the thesis-model gain). "synthesised" keeps ``F_r``. Stability
-    depends on ``F_s`` only.
+
+    The reference enters through the static prefilter ``-F_s T`` (T puts r on the
+    x, y, z, q3 states), which makes hover at the reference an equilibrium: the
+    standard problem models the reference as the output of the low-pass ``W_r``
+    that decays to zero, so the synthesised ``F_r`` would only follow a fraction
+    of a constant reference (about 0.66 for the thesis-model gain). Stability
+    depends on ``F_s`` only. As for the LQR, the state is taken relative to the
+    reference in the vehicle's heading frame (:func:`.base.fill_heading_state`).
     """
 
+    lead_s = 0.0
+
     def __init__(self, gain: HinfGain, *, params: QuadrotorParams | None = None,
-                 limits: CommandLimits | None = None,
-                 reference_gain: Literal["dc", "synthesised"] = "dc") -> None:
+                 limits: CommandLimits | None = None) -> None:
         p = params if params is not None else QuadrotorParams()
         self.gain = gain
         self._n_s = gain.F_s.shape[1]
         if self._n_s not in (9, 12):
             raise ControlError(f"F_s must have 9 or 12 columns, found {self._n_s}")
-        if reference_gain not in ("dc", "synthesised"):
-            raise ControlError(f"reference_gain must be 'dc' or 'synthesised', "
-                               f"found {reference_gain!r}")
-        F_r = -gain.F_s[:, H_OUTPUTS] if reference_gain == "dc" else gain.F_r
-        self._K = np.hstack([gain.F_s, F_r])
-        self._z = np.zeros(self._n_s + 4)
+        self._K = gain.F_s
+        self._z = np.zeros(self._n_s)
         self._u = np.zeros(4)
+        self._frame = HeadingFrame()
         lim = limits or CommandLimits.from_stick_params(StickParams.from_quadrotor(p))
         self._u_lo = np.array([*lim.omega_min, lim.f_z_min])
         self._u_hi = np.array([*lim.omega_max, lim.f_z_max])
@@ -152,14 +150,16 @@ class HinfController:
     def reset(self) -> None:
         """Stateless apart from scratch buffers: nothing to forget."""
 
-    def step(self, t: float, estimate: StateEstimate, reference: Reference) -> ControlOutput:
-        """``u = F_s x_s + F_r r`` with the rates fed back for a lag-model gain."""
+    def sent(self, output: ControlOutput, automatic: bool) -> None:
+        """Nothing to record: a static state feedback."""
+
+    def step(self, t: float, estimate: StateEstimate, reference: Reference,
+             preview: Reference | None = None) -> ControlOutput:
+        """``u = F_s (x_s - T r)`` with the rates fed back for a lag-model gain."""
         z = self._z
-        fill_reduced_state(estimate, z)
-        n = self._n_s
-        if n == 12:
+        fill_heading_state(self._frame, estimate, reference, z)
+        if self._n_s == 12:
             z[9:12] = estimate.omega
-        reference_outputs(reference, z[n:])
         u = np.dot(self._K, z, out=self._u)
         np.clip(u, self._u_lo, self._u_hi, out=u)
         return ControlOutput(omega=u[0:3].copy(), f_z=float(u[3]))

@@ -27,6 +27,7 @@ under constant disturbances); ``E`` is how the reference drives them.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -80,6 +81,50 @@ def discretise(A: FloatArray, B: FloatArray, dt: float) -> tuple[FloatArray, Flo
     block[:n, n:] = B
     e = scipy.linalg.expm(block * dt)
     return e[:n, :n], e[:n, n:]
+
+
+def discretise_delayed(A: FloatArray, B: FloatArray, period: float,
+                       delay: float) -> tuple[FloatArray, FloatArray, int]:
+    """ZOH discretisation with an input transport delay: ``(Φ_d, Γ_d, l)``.
+
+    The input is held over each ``period`` [s] and reaches the plant ``delay`` [s]
+    after it is sent. With ``delay = (l - 1) period + m``, ``0 < m <= period``, the
+    input acting over one period is ``u(k-l)`` for its first ``m`` seconds and
+    ``u(k-l+1)`` for the rest (Åström and Wittenmark, *Computer-Controlled
+    Systems*, Ch. 2.3)::
+
+        x(k+1) = Φ x(k) + Γ_1 u(k-l+1) + Γ_0 u(k-l)
+        Γ_1 = ∫_0^{period-m} e^{As} ds B,    Γ_0 = e^{A (period-m)} ∫_0^m e^{As} ds B
+
+    The returned model's state is ``[x; u(k-1); ...; u(k-l)]`` (n + l m_in); its
+    input is ``u(k)``, the command sent now. ``delay = 0`` gives the plain ZOH
+    model (``l = 0``).
+    """
+    n, m_in = B.shape
+    if not (period > 0.0 and delay >= 0.0 and math.isfinite(delay)):
+        raise ControlError(f"need period > 0 and a finite delay >= 0, found {period!r}, "
+                           f"{delay!r}")
+    Phi, Gamma = discretise(A, B, period)
+    if delay == 0.0:
+        return Phi, Gamma, 0
+    past = max(1, math.ceil(delay / period - 1e-12))
+    m = delay - (past - 1) * period
+    Gamma_m = discretise(A, B, m)[1]
+    Phi_rest, Gamma_1 = discretise(A, B, period - m)
+    Gamma_0 = Phi_rest @ Gamma_m
+    size = n + past * m_in
+    Phi_d = np.zeros((size, size))
+    Gamma_d = np.zeros((size, m_in))
+    Phi_d[:n, :n] = Phi
+    Phi_d[:n, n + (past - 1) * m_in:] = Gamma_0  # u(k-l), the oldest
+    if past == 1:
+        Gamma_d[:n] = Gamma_1  # u(k-l+1) is the command sent now
+    else:
+        Phi_d[:n, n + (past - 2) * m_in: n + (past - 1) * m_in] = Gamma_1
+    Gamma_d[n:n + m_in] = np.eye(m_in)  # u(k-1) <- u(k)
+    for j in range(1, past):  # u(k-j-1) <- u(k-j)
+        Phi_d[n + j * m_in: n + (j + 1) * m_in, n + (j - 1) * m_in: n + j * m_in] = np.eye(m_in)
+    return Phi_d, Gamma_d, past
 
 
 def dlqr(Phi: FloatArray, Gamma: FloatArray, Q: FloatArray,

@@ -86,12 +86,18 @@ class PidController:
         self._v_prev = np.zeros(3)
         self._have_prev = False
 
+    lead_s = 0.0
+
     def reset(self) -> None:
         """Zero the velocity integrators and the derivative memory."""
         self._integral[:] = 0.0
         self._have_prev = False
 
-    def step(self, t: float, estimate: StateEstimate, reference: Reference) -> ControlOutput:
+    def sent(self, output: ControlOutput, automatic: bool) -> None:
+        """Nothing to record: the cascade feeds back measured states only."""
+
+    def step(self, t: float, estimate: StateEstimate, reference: Reference,
+             preview: Reference | None = None) -> ControlOutput:
         """One cascade evaluation: body-rate set points [rad/s] and F_z [N]."""
         q = estimate.quaternion
         v = dcm_from_quat(q) @ estimate.velocity_body  # earth axes

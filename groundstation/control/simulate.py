@@ -29,7 +29,7 @@ from groundstation.control.sticks import StickParams, to_sticks
 from groundstation.control.trajectory import Trajectory
 from groundstation.model import QuadrotorModel, QuadrotorParams, inputs_from_sticks
 from groundstation.model.quaternion import dcm_from_quat
-from groundstation.types import FloatArray, StateEstimate
+from groundstation.types import ControlOutput, FloatArray, StateEstimate
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,7 +79,7 @@ def simulate(
     *,
     params: QuadrotorParams | None = None,
     plant: SimPlant | None = None,
-    rate_hz: float = 100.0,
+    rate_hz: float = 50.0,
     x0: FloatArray | None = None,
 ) -> SimResult:
     """Fly ``controller`` along ``trajectory`` for ``duration`` seconds (simulated).
@@ -107,9 +107,12 @@ def simulate(
     for k in range(n):
         t = k / rate_hz
         ref = trajectory.sample(t)
-        out = controller.step(t, _estimate(t, x, omega), ref)
+        lead = controller.lead_s
+        preview = trajectory.sample(t + lead) if lead > 0.0 else None
+        out = controller.step(t, _estimate(t, x, omega), ref, preview)
         st, flags = to_sticks(out, sp)
         u = inputs_from_sticks(st, p)
+        controller.sent(ControlOutput(omega=u[0:3].copy(), f_z=float(u[3])), True)
         u[3] = pl.thrust_scale * (u[3] - weight) + weight  # true lift = scale * modelled
         _record(rec, k, x, ref.position, ref.velocity, out.omega)
         quat[k], f_z[k], sat[k] = x[3:7], out.f_z, flags.any

@@ -261,4 +261,6 @@ class FigureEight:
         pos = self._c + np.array([0.5 * a * s2, a * s1, 0.0])
         vel = np.array([a * w * c2, a * w * c1, 0.0])
         acc = np.array([-2.0 * a * w * w * s2, -a * w * w * s1, 0.0])
-        return Reference(t=t, position=pos, velocity=vel, acceleration=acc, yaw=self._yaw)
+        jerk = np.array([-4.0 * a * w ** 3 * c2, -a * w ** 3 * c1, 0.0])
+        return Reference(t=t, position=pos, velocity=vel, acceleration=acc, yaw=self._yaw,
+                         jerk=jerk)

@@ -162,7 +162,11 @@ def simulate_model(scenario: Scenario, base: GroundStationConfig) -> SimResult:
     cfg = scenario_config(scenario, base)
     assert cfg.sim is not None  # scenario_config checked it
     controller = controller_from_config(cfg)
-    plant = SimPlant(rate_tau=cfg.sim.rate_loop_tau_s, delay_s=cfg.sim.command_delay_s,
-                     thrust_scale=cfg.sim.thrust_scale)
+    sim, vehicle = cfg.sim, cfg.vehicle
+    plant = SimPlant(
+        rate_tau=vehicle.rate_loop_tau_s if sim.rate_loop_tau_s is None else sim.rate_loop_tau_s,
+        delay_s=vehicle.command_delay_s if sim.command_delay_s is None else sim.command_delay_s,
+        thrust_scale=sim.thrust_scale)
     return simulate(controller, scenario_trajectory(scenario, cfg), scenario.duration_s,
-                    params=quadrotor_params(cfg), plant=plant, rate_hz=cfg.controller.rate_hz)
+                    params=quadrotor_params(cfg), plant=plant,
+                    rate_hz=cfg.serial.command_rate_hz)

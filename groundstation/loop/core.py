@@ -13,10 +13,13 @@ Per tick (one DATA sample, 100 Hz):
    :meth:`FlightCore.estimate_step`);
 2. supervisor: observe link, Vicon, estimator, pilot and position; change state;
 3. mission: the reference for the current phase;
-4. controller -> body rates and F_z -> stick units -> channel handover ->
-   CommandMsg (ctrl mask 0 whenever the supervisor is not commanding);
-5. the command is due at the configured command rate (and at once on a change
-   between commanding and not commanding).
+4. when a COMMAND is due (at the configured command rate, and at once on a
+   change between commanding and not commanding): controller (with the mission's
+   preview of the reference when it asks for one) -> body rates and F_z -> stick
+   units -> channel handover -> CommandMsg; the controller is told what went out
+   (ctrl mask 0 whenever the supervisor is not commanding). The controllers are
+   designed at the command period, so they step once per COMMAND; between
+   COMMANDs the last one stands.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from groundstation.asctec.channels import ChannelHandover
-from groundstation.asctec.messages import Channel, CommandMsg
+from groundstation.asctec.messages import ALL_CHANNELS_MASK, Channel, CommandMsg
 from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller
 from groundstation.control.sticks import StickParams, to_sticks
@@ -41,7 +44,8 @@ from groundstation.loop.assemble import controller_from_config
 from groundstation.loop.inputs import InputHealth, VehicleStatus, quadrotor_params
 from groundstation.loop.mission import Mission
 from groundstation.loop.supervisor import Observation, State, Supervisor, SupervisorLimits
-from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
+from groundstation.model import inputs_from_sticks
+from groundstation.types import ControlOutput, ImuSample, Pose, Reference, StateEstimate, Sticks
 
 INIT_IMU_SAMPLES = 20
 """IMU samples (0.2 s at 100 Hz) averaged with the first Vicon fix to initialise."""
@@ -107,7 +111,10 @@ class FlightCore:
         self.supervisor = Supervisor(limits_from_config(config))
         self.handover = ChannelHandover(blend_time=config.serial.handover_blend_s)
         self._auto = tuple(config.channels.auto)
+        self._quad = quad
         self._stick_params = StickParams.from_quadrotor(quad)
+        self._sticks: Sticks | None = None  # the controller's sticks of the last COMMAND
+        self._command = CommandMsg.release()
         self._weight = quad.mass * quad.g  # [N]
         self._lift_fraction = 1.0  # last commanded lift / weight, for the landing check
         self._command_period = 1.0 / config.serial.command_rate_hz
@@ -150,19 +157,22 @@ class FlightCore:
             self._enter(state, t, position)
         reference = self.mission.reference(t)
         commanding = self.supervisor.commanding
-        sticks: Sticks | None = None
-        if commanding and self._estimate is not None:
-            sticks = self._control(t, state, self._estimate, reference)
-            command = self.handover.compose(t, sticks, vehicle.pilot)
-        else:
-            command = CommandMsg.release()
         due = t >= self._next_command or commanding != self._was_commanding
         if due:
             self._next_command = max(self._next_command + self._command_period, t)
             if self._next_command <= t:
                 self._next_command = t + self._command_period
         self._was_commanding = commanding
-        return TickResult(command, due, state, reference, self._estimate, sticks)
+        if not (commanding and self._estimate is not None):
+            self._sticks = None
+            self._command = CommandMsg.release()
+        elif due or self._sticks is None:
+            # The controllers are designed at the command period: one step per COMMAND.
+            self._sticks = self._control(t, state, self._estimate, reference)
+            self._command = self.handover.compose(t, self._sticks, vehicle.pilot)
+            if state is not State.DISARM:
+                self._report_sent(self._command, t)
+        return TickResult(self._command, due, state, reference, self._estimate, self._sticks)
 
     # ------------------------------------------------------------------ steps
     def estimate_step(self, imu: ImuSample | None, poses: Sequence[Pose]) -> StateEstimate | None:
@@ -251,7 +261,19 @@ class FlightCore:
                  reference: Reference) -> Sticks:
         if state is State.DISARM:
             return Sticks(0, 0, 0, 0)  # motors to idle on the floor before handing back
-        output = self.controller.step(t, est, reference)
+        lead = self.controller.lead_s
+        preview = self.mission.preview(t, lead) if lead > 0.0 else None
+        output = self.controller.step(t, est, reference, preview)
         self._lift_fraction = 1.0 - output.f_z / self._weight  # f_z = F_lift + m g, lift < 0
         sticks, _flags = to_sticks(output, self._stick_params)
         return sticks
+
+    def _report_sent(self, command: CommandMsg, t: float) -> None:
+        """Tell the controller what the vehicle was sent, in physical units: the pilot's
+        sticks on manual channels, the blend during a handover, the saturation."""
+        sticks = Sticks(roll=command.roll, pitch=command.pitch, yaw=command.yaw,
+                        thrust=command.thrust)
+        u = inputs_from_sticks(sticks, self._quad)
+        automatic = (command.ctrl == ALL_CHANNELS_MASK
+                     and not self.handover.blending(t))
+        self.controller.sent(ControlOutput(omega=u[0:3], f_z=float(u[3])), automatic)

@@ -12,7 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from groundstation.asctec.messages import DataMsg
+from groundstation.asctec.blocks import DATA_SIZE_BY_MASK
+from groundstation.asctec.decoder import FRAME_OVERHEAD
+from groundstation.asctec.messages import CommandMsg, DataMsg
 from groundstation.config import GroundStationConfig
 from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.model.sensors import AxisScaling, ImuScaling
@@ -52,12 +54,24 @@ def _vec3(values: list[float]) -> tuple[float, float, float]:
     return (float(values[0]), float(values[1]), float(values[2]))
 
 
+def wire_time_s(config: GroundStationConfig) -> float:
+    """Time [s] one DATA frame (of the configured blocks) and one COMMAND frame spend on
+    the serial wire at the configured baud: 10 bits per byte (8N1), frame = N + 11
+    bytes (spec sections 1 and 3)."""
+    data_bytes = DATA_SIZE_BY_MASK[config.serial.sensor_mask] + FRAME_OVERHEAD
+    command_bytes = max(CommandMsg.PAYLOAD_SIZES) + FRAME_OVERHEAD
+    return 10.0 * (data_bytes + command_bytes) / config.serial.baud
+
+
 def quadrotor_params(config: GroundStationConfig) -> QuadrotorParams:
-    """Model parameters from the vehicle section."""
+    """Model parameters from the vehicle section; the input delay is the command
+    delay plus the frames' time on the wire (:func:`wire_time_s`)."""
     v = config.vehicle
     a3, a2, a1, a0 = v.thrust_poly
     return QuadrotorParams(mass=v.mass_kg, g=v.gravity, k_rate=_vec3(v.k_rate),
-                           inflow=v.induced_inflow, thrust_poly=(a3, a2, a1, a0))
+                           inflow=v.induced_inflow, thrust_poly=(a3, a2, a1, a0),
+                           rate_tau=v.rate_loop_tau_s,
+                           input_delay=v.command_delay_s + wire_time_s(config))
 
 
 def imu_scaling(config: GroundStationConfig) -> ImuScaling:

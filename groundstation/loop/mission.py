@@ -150,6 +150,21 @@ class Mission:
         """True once the trajectory has been flown for its duration."""
         return self._track_clock >= self.duration_s
 
+    def preview(self, t: float, lead: float) -> Reference:
+        """The reference ``lead`` seconds after ``t`` in the current phase, without advancing
+        the trajectory clock (call after :meth:`reference` for the same ``t``)."""
+        state = self._state
+        if state is State.TRACK:
+            return self._trajectory(self._track_clock + lead)
+        if state in (State.TAKEOFF, State.LAND) and self._path:
+            ahead = t + lead
+            seg = next((s for s in self._path if ahead < s.t0 + s.duration), self._path[-1])
+            pos, vel = seg.at(ahead)
+            return Reference(ahead, pos, vel)
+        if state is State.HOLD:
+            return Reference(t + lead, self._hold_point.copy(), np.zeros(3))
+        return Reference(t + lead, self._rest_point.copy(), np.zeros(3))
+
     def reference(self, t: float) -> Reference:
         """The reference at time ``t`` for the current phase."""
         dt = 0.0 if self._last_t is None else max(t - self._last_t, 0.0)
