@@ -8,6 +8,7 @@ holds its thresholds against.
     .venv/bin/python benchmarks/bench_eval.py                 # report into a temp dir
     .venv/bin/python benchmarks/bench_eval.py --out eval      # keep the report
     .venv/bin/python benchmarks/bench_eval.py --real-time     # the real-time suite (slow)
+    .venv/bin/python benchmarks/bench_eval.py --perturb 1-5   # worst case over 5 vehicles
 
 Target: the fast suite within 2-3 minutes on 2 cores.
 """
@@ -26,6 +27,7 @@ sys.path.insert(0, str(REPO))
 
 from groundstation.config import load_config  # noqa: E402
 from groundstation.evaluation import run_eval  # noqa: E402
+from groundstation.evaluation.perturb import parse_seeds  # noqa: E402
 from groundstation.logs import configure_logging  # noqa: E402
 
 
@@ -34,12 +36,14 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=None, help="report directory")
     parser.add_argument("--real-time", action="store_true", help="fly in real time")
     parser.add_argument("--config", type=Path, default=REPO / "config" / "sim.yaml")
+    parser.add_argument("--perturb", action="append", default=[],
+                        help="seed(s) of perturbed vehicles, as gs eval --perturb")
     args = parser.parse_args()
     configure_logging("warning", "console")
     out = args.out or Path(tempfile.mkdtemp(prefix="bench_eval_"))
     cpu0, wall0 = time.process_time(), time.perf_counter()
     report = run_eval(load_config(args.config), fast=not args.real_time, out_dir=out,
-                      progress=print)
+                      progress=print, perturb=parse_seeds(args.perturb))
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     flights = sum(o.wall_s for o in report.outcomes.values())
     print(f"\nsuite: {len(report.outcomes)} flights in {wall:.1f} s wall "

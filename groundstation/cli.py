@@ -58,10 +58,18 @@ def version() -> None:
 
 @app.command("check-config")
 def check_config(file: Annotated[Path, typer.Argument(help="YAML configuration file.")]) -> None:
-    """Validate a configuration file and print it with every default filled in."""
+    """Validate a configuration file and print it with every default filled in.
+
+    The trajectory is built, shaped and checked as `gs fly` would (limits, volume);
+    exit code 2 if the file or its trajectory is refused.
+    """
+    from groundstation.errors import TrajectoryError
+    from groundstation.loop.assemble import trajectory_for_flight
+
     try:
         config = load_config(file)
-    except ConfigError as exc:
+        trajectory_for_flight(config)
+    except (ConfigError, TrajectoryError) as exc:
         raise _fail(str(exc), 2) from exc
     typer.echo(dump_config(config), nl=False)
 
@@ -165,17 +173,25 @@ def evaluate(
     out: Annotated[Path, typer.Option(help="Report directory.")] = Path("eval_out"),
     scenario: Annotated[list[str] | None, typer.Option(
         help="Fly only these scenarios (repeatable; default all).")] = None,
+    perturb: Annotated[list[str] | None, typer.Option(
+        help="Fly every scenario on the plant drawn for this seed (repeatable; a range "
+             "1-5 or a list 1,4); the report gives the worst case over the seeds.")] = None,
 ) -> None:
-    """Fly the thesis's Ch. 11 flight tests in the virtual lab and write a report.
+    """Fly the thesis's Ch. 11 flight tests and issue 13's in the virtual lab; write a report.
 
     Metrics come from the virtual lab's ground truth; the report is ``report.md`` with
-    PNG figures mirroring Fig. 11.1-11.8 and ``metrics.json``.
+    PNG figures mirroring Fig. 11.1-11.8 and ``metrics.json``. With ``--perturb`` the
+    virtual vehicle differs from the design model (rate gains, rate-loop lag, mass,
+    thrust, delay, IMU errors: see groundstation/evaluation/perturb.py).
     """
     from groundstation.evaluation import run_eval
+    from groundstation.evaluation.perturb import parse_seeds
 
     cfg = load(config)
     try:
-        report = run_eval(cfg, fast=fast, out_dir=out, scenarios=scenario, progress=typer.echo)
+        seeds = parse_seeds(perturb or [])
+        report = run_eval(cfg, fast=fast, out_dir=out, scenarios=scenario, progress=typer.echo,
+                          perturb=seeds)
     except GroundStationError as exc:
         raise _fail(str(exc), 2 if isinstance(exc, ConfigError) else 1) from exc
     typer.echo(f"{len(report.outcomes)} scenarios in {report.wall_s:.0f} s: {report.report_md}, "
@@ -302,11 +318,18 @@ def synth_hinf(
 
     cfg = load(config)
     h = cfg.controller.hinf
+    integral = None if h.integral_scale is None else tuple(h.integral_scale)
     weights = HinfWeights(eps=h.epsilon, reference_pole=h.reference_pole,
-                          noise_gain=h.noise_gain)
+                          noise_gain=h.noise_gain,
+                          integral_scale=integral)  # type: ignore[arg-type]  # 4 by validation
+    robust = h.robust_range if rate_loop else 0.0
+    if robust > 0.0:
+        typer.echo(f"robust design for rate gains and rate-loop lag within +-{100 * robust:g} "
+                   "% (a few minutes)", err=True)
     try:
         gain = synthesise_hinf(quadrotor_params(cfg), include_rate_loop=rate_loop,
-                               weights=weights)
+                               weights=weights, robust_range=robust,
+                               pole_radius=h.pole_radius_rad_s if rate_loop else None)
     except GroundStationError as exc:  # also: cvxpy (the `hinf` extra) not installed
         raise _fail(str(exc), 1) from exc
     gain.save(out)

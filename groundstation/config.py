@@ -335,9 +335,22 @@ class HinfConfig(_Model):
     include_rate_loop: bool = True
     # design on the model with the rate-loop lag (Ch. 10.3): the thesis's model without
     # it gave a controller that did not stabilise the real vehicle
+    # The packaged rate-loop gain is robust and has integral action (control/hinf.py):
+    # the weights below are what `gs synth hinf` designs a new gain with
     epsilon: PositiveFloat = 0.1  # D12 input weight (eq. 10.5), tuned
     reference_pole: PositiveFloat = 1.0  # a_i of W_r (eq. 10.10) [rad/s], tuned
     noise_gain: PositiveFloat = 0.01  # k of W_n (eq. 10.9), tuned
+    integral_scale: list[float] | None = Field(
+        default_factory=lambda: [0.3, 0.3, 0.3, 0.1], min_length=4, max_length=4)
+    # weights of the integrated [x, y, z, q3] errors (beyond the thesis: zero steady-state
+    # error under a thrust-map error, issue 13); null: the thesis's design, no integrators
+    robust_range: float = Field(0.3, ge=0.0, lt=1.0)
+    # design for rate gains and rate-loop time constant within +- this fraction (issue 13:
+    # 30 %); 0 = the nominal plant only, as the thesis
+    pole_radius_rad_s: PositiveFloat | None = 10.0
+    # keep the closed-loop poles in this disc: no loop faster than the 50 Hz, ~40 ms
+    # delayed command link carries; null = unconstrained, as the thesis
+    integral_limit: PositiveFloat = 2.0  # anti-windup clamp on each integrated error [m s]
 
 
 class LqrFfConfig(_Model):

@@ -91,3 +91,31 @@ def test_channels_talks_to_the_control_socket() -> None:
 def test_channels_without_a_daemon_fails_clearly() -> None:
     res = runner.invoke(app, ["channels", "--endpoint", "tcp://127.0.0.1:9", "--timeout", "0.2"])
     assert res.exit_code == 1 and "no reply from tcp://127.0.0.1:9 within 0.2 s" in res.output
+
+
+def _config_file(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "gs.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_check_config_refuses_a_trajectory_outside_the_volume(tmp_path: Path) -> None:
+    good = runner.invoke(app, ["check-config", str(_config_file(tmp_path, "trajectory:\n"
+                                                                "  name: square\n"))])
+    assert good.exit_code == 0, good.output
+    assert "shaping: min-jerk" in good.output
+    bad = _config_file(tmp_path, "trajectory:\n  name: square\n  center: [0.0, 1.2, -1.0]\n")
+    res = runner.invoke(app, ["check-config", str(bad)])
+    assert res.exit_code == 2
+    assert ("y = 1.57 m is outside safety.volume_y [-1.50, 1.50] less the 0.10 m margin"
+            in res.output)
+    # gs fly refuses the same file before connecting to anything (a software port, in case)
+    fly = runner.invoke(app, ["fly", "--config", str(bad), "--serial-port", "loop://"])
+    assert fly.exit_code == 2 and "outside safety.volume_y" in fly.output
+
+
+def test_check_config_refuses_a_missing_waypoint_file(tmp_path: Path) -> None:
+    missing = tmp_path / "absent.csv"
+    res = runner.invoke(app, ["check-config", str(_config_file(
+        tmp_path, f"trajectory:\n  name: waypoints\n  file: {missing}\n"))])
+    assert res.exit_code == 2 and "absent.csv: cannot read waypoints" in res.output

@@ -4,7 +4,11 @@ Expected values are closed forms: a pure delay gives its delay as lag; a
 first-order step response settles to 2 % at tau ln 50 without overshoot; a
 second-order one overshoots by exp(-zeta pi / sqrt(1 - zeta^2)); a constant
 offset gives its own length as RMS and maximum; a roll-only quaternion has the
-roll as tilt.
+roll as tilt; a point's distance to a square is the Euclidean distance to the
+square's boundary (outside: the norm of the excess over the half-side per axis,
+inside: the half-side less the larger coordinate); a circle of radius R + e is
+e off a circle of radius R; a quaternion built from Euler angles has their yaw as
+heading.
 """
 
 from __future__ import annotations
@@ -15,9 +19,12 @@ import numpy as np
 import pytest
 
 from groundstation.evaluation.metrics import (
+    PATH_SEGMENT_M,
+    heading_deg,
     lag_s,
     lap_mean,
     moving_axes,
+    path_distances,
     percentiles,
     resample,
     rms,
@@ -25,6 +32,7 @@ from groundstation.evaluation.metrics import (
     tilt_deg,
     track_clock,
     tracking_errors,
+    wrap_deg,
 )
 from groundstation.model.quaternion import quat_from_euler
 
@@ -151,3 +159,71 @@ def test_resample_is_linear_interpolation() -> None:
     grid, out = resample(np.array([0.0, 1.0, 3.0]), np.array([0.0, 2.0, 6.0]), 0.5)
     assert grid == pytest.approx([0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0])
     assert out[:, 0] == pytest.approx(2 * grid)
+
+
+def square_distance(p: np.ndarray, h: float) -> np.ndarray:
+    """Closed form: distance of (N, 2) points to the boundary of the square |x|, |y| <= h."""
+    a = np.abs(p)
+    outside = np.linalg.norm(np.clip(a - h, 0.0, None), axis=1)
+    inside = h - np.max(a, axis=1)
+    return np.asarray(np.where(np.all(a <= h, axis=1), inside, outside))
+
+
+def test_distance_to_a_square_path_is_the_closed_form() -> None:
+    h = 0.375
+    corners = np.array([[h, -h], [h, h], [-h, h], [-h, -h], [h, -h]])  # the Ch. 11 square
+    points = np.random.default_rng(7).uniform(-0.6, 0.6, size=(2000, 2))
+    points = np.vstack([points, [[0.5, 0.5], [h, h], [0.0, 0.0], [h + 0.01, 0.0]]])
+    d = path_distances(points, corners)
+    assert d == pytest.approx(square_distance(points, h), abs=1e-12)
+    assert d[-4:] == pytest.approx([math.hypot(0.125, 0.125), 0.0, h, 0.01], abs=1e-12)
+
+
+def test_distance_to_a_densely_sampled_path_does_not_depend_on_the_sampling() -> None:
+    # the square as 10 ms reference samples at 0.15 m/s (repeated vertices where it would
+    # stand) gives the same distances as its four corners
+    h = 0.375
+    t = np.arange(0.0, 20.0 + 1e-9, 0.01)
+    corners = np.array([[h, -h], [h, h], [-h, h], [-h, -h], [h, -h]])
+    dense = np.column_stack([np.interp(t, np.linspace(0.0, 20.0, 5), corners[:, k])
+                             for k in range(2)])
+    dense = np.vstack([dense[:100], np.repeat(dense[100:101], 50, axis=0), dense[100:]])
+    points = np.random.default_rng(8).uniform(-0.5, 0.5, size=(500, 2))
+    assert path_distances(points, dense) == pytest.approx(square_distance(points, h), abs=1e-12)
+
+
+def test_distance_off_a_circle() -> None:
+    # a circle of radius R + e flown against one of radius R: e everywhere, up to the chord
+    # sagitta R (1 - cos(dtheta / 2)) of the sampled reference
+    radius, e, n = 0.4, 0.01, 2000
+    theta = np.linspace(0.0, 2 * math.pi, n + 1)
+    ref = np.column_stack([radius * np.cos(theta), radius * np.sin(theta), -np.ones_like(theta)])
+    phase = theta[:-1] + 0.37  # any timing: the distance to the path ignores it
+    flown = np.column_stack([(radius + e) * np.cos(phase), (radius + e) * np.sin(phase),
+                             -np.ones_like(phase)])
+    sagitta = radius * (1 - math.cos(math.pi / n))
+    d = path_distances(flown, ref)
+    assert np.all(d >= e - 1e-12) and np.all(d <= e + sagitta + 1e-12)
+    assert rms(d) == pytest.approx(e, abs=sagitta)
+
+
+def test_distance_to_a_long_segment_and_to_a_single_point() -> None:
+    segment = np.array([[0.0, 0.0, -1.0], [2.0, 0.0, -1.0]])  # split into 5 mm pieces
+    assert 2.0 / PATH_SEGMENT_M > 100
+    points = np.array([[1.2345, 0.03, -1.0], [-0.03, 0.04, -1.0], [2.0, 0.0, -1.2]])
+    assert path_distances(points, segment) == pytest.approx([0.03, 0.05, 0.2], abs=1e-12)
+    hover = np.tile([0.0, 0.0, -1.0], (300, 1))
+    assert path_distances(points[:2], hover) == pytest.approx(
+        [math.hypot(1.2345, 0.03), 0.05], abs=1e-12)
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 90.0, 135.0, 179.0, -135.0, -30.0])
+def test_heading_is_the_euler_yaw(yaw_deg: float) -> None:
+    q = np.array([quat_from_euler(math.radians(r), math.radians(p), math.radians(yaw_deg))
+                  for r, p in ((0.0, 0.0), (10.0, -5.0), (-20.0, 15.0))])
+    assert heading_deg(q) == pytest.approx([yaw_deg] * 3, abs=1e-9)
+
+
+def test_wrap_deg() -> None:
+    assert wrap_deg(np.array([0.0, 190.0, -190.0, 358.0, 540.0, -180.0])) == pytest.approx(
+        [0.0, -170.0, 170.0, -2.0, -180.0, -180.0])

@@ -8,6 +8,7 @@ filter. Thresholds are the figures reached with a stated margin.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -101,9 +102,16 @@ def test_long_vicon_outage_lands_on_the_imu_estimate(tmp_path: Path) -> None:
     assert result.final_state is State.DONE and on_the_ground(result)
 
 
+def narrow_volume(flight: InProcessFlight) -> None:
+    """The supervisor's x limits shrink to +-0.2 m in flight (a square so narrow is refused
+    before flight, so the failsafe is exercised by moving the wall, not the trajectory)."""
+    sup = flight.core.supervisor
+    sup.limits = dataclasses.replace(sup.limits, volume_x=(-0.2, 0.2))
+
+
 def test_leaving_the_volume_lands(tmp_path: Path) -> None:
-    cfg = sim_config(**{"trajectory.name": "square", "safety.volume_x": [-0.2, 0.2]})
-    result = run_logged(cfg, tmp_path, 20.0, [])
+    cfg = sim_config(**{"trajectory.name": "square"})
+    result = run_logged(cfg, tmp_path, 20.0, [(12.0, narrow_volume)])
     land = next(tr for tr in result.transitions if tr.new is State.LAND)
     assert "left the volume" in land.reason
     assert result.final_state is State.DONE and on_the_ground(result)

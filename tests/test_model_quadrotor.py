@@ -120,10 +120,15 @@ def test_inputs_from_sticks() -> None:
 
 
 def _ctrb_rank(A: np.ndarray, B: np.ndarray) -> int:
+    """Rank of the Kalman controllability matrix, in time units of the rate loop: the
+    rank is invariant under the time scaling (A, B) -> (c A, c B), and with c = tau the
+    powers of the fast rate-loop pole (1/tau) stay of order one, so the numerical rank
+    is not lost to scaling."""
+    c = PARAMS.rate_tau
     n = A.shape[0]
-    blocks = [B]
+    blocks = [c * B]
     for _ in range(n - 1):
-        blocks.append(A @ blocks[-1])
+        blocks.append(c * A @ blocks[-1])
     return int(np.linalg.matrix_rank(np.hstack(blocks)))
 
 

@@ -6,6 +6,7 @@ import dataclasses
 import math
 
 import pytest
+from structlog.testing import capture_logs
 
 from groundstation.loop.supervisor import (
     Observation,
@@ -208,3 +209,29 @@ def test_terminal_states_stay_terminal() -> None:
     sup.update(obs(t + 1.0, data_age_s=1.0, **FLYING_AT_1M))
     assert sup.state is State.LINK_LOST
     assert sup.update(obs(t + 2.0)) is State.LINK_LOST
+
+
+def test_a_takeoff_that_does_not_complete_lands_after_the_timeout() -> None:
+    sup = Supervisor(SupervisorLimits(takeoff_timeout_s=12.0))
+    assert sup.update(obs(1.0)) is State.TAKEOFF
+    stuck = {"position": (0.0, 0.0, -0.3), "height_above_ground_m": 0.3}
+    with capture_logs() as logs:
+        assert sup.update(obs(13.0, **stuck)) is State.TAKEOFF  # 12 s: not yet
+        assert sup.update(obs(13.01, **stuck)) is State.LAND
+    reason = sup.transitions[-1].reason
+    assert "take-off timeout" in reason and "12.0 s" in reason and "(0.00, 0.00, -0.30)" in reason
+    assert [(e["log_level"], e["failsafe"], e["new"]) for e in logs] == [
+        ("warning", True, "LAND")]
+    # a take-off that completes in time is not affected
+    sup = Supervisor(SupervisorLimits(takeoff_timeout_s=12.0))
+    sup.update(obs(1.0))
+    assert sup.update(obs(12.9, takeoff_done=True, **FLYING_AT_1M)) is State.TRACK
+    assert sup.update(obs(30.0, **FLYING_AT_1M)) is State.TRACK
+
+
+def test_the_takeoff_timeout_comes_from_the_configuration() -> None:
+    from groundstation.config import validate_config
+    from groundstation.loop.core import limits_from_config
+
+    cfg = validate_config({"safety": {"takeoff_timeout_s": 7.5}})
+    assert limits_from_config(cfg).takeoff_timeout_s == 7.5

@@ -12,7 +12,13 @@ and the trajectory reference and converts its output to sticks with
 
 from groundstation.control.base import Controller, NullController
 from groundstation.control.disturbance import DisturbanceObserver
-from groundstation.control.feasibility import FeasibilityReport, FlightLimits, check_feasibility
+from groundstation.control.feasibility import (
+    FeasibilityReport,
+    FlightLimits,
+    LimitNames,
+    Volume,
+    check_feasibility,
+)
 from groundstation.control.lqr import LqrController
 from groundstation.control.lqr_design import (
     TrackingGains,
@@ -23,6 +29,7 @@ from groundstation.control.lqr_design import (
 )
 from groundstation.control.metrics import StepMetrics, rms_error, step_metrics, time_lag
 from groundstation.control.pid import PidController
+from groundstation.control.shaping import MinJerkPath, TimeWarp, shape_for_flight
 from groundstation.control.sticks import (
     CommandLimits,
     SaturationFlags,
@@ -36,7 +43,13 @@ from groundstation.control.trajectories import (
     trajectory_from_config,
     yz_rectangle,
 )
-from groundstation.control.trajectory import FigureEight, Hover, PiecewiseLinear, Trajectory
+from groundstation.control.trajectory import (
+    FigureEight,
+    Hover,
+    PiecewiseLinear,
+    Trajectory,
+    YawTurn,
+)
 
 __all__ = [
     "CommandLimits",
@@ -46,15 +59,20 @@ __all__ = [
     "FigureEight",
     "FlightLimits",
     "Hover",
+    "LimitNames",
     "LqrController",
+    "MinJerkPath",
     "NullController",
     "PidController",
     "PiecewiseLinear",
     "SaturationFlags",
     "StepMetrics",
     "StickParams",
+    "TimeWarp",
     "TrackingGains",
     "Trajectory",
+    "Volume",
+    "YawTurn",
     "check_feasibility",
     "design_tracking_lqr",
     "discretise",
@@ -63,6 +81,7 @@ __all__ = [
     "make_trajectory",
     "riccati_iteration",
     "rms_error",
+    "shape_for_flight",
     "square",
     "step_metrics",
     "time_lag",

@@ -128,7 +128,10 @@ class HeadingFrame:
         ch, sh = math.cos(0.5 * psi), math.sin(0.5 * psi)
         self.yaw = psi
         self.cos, self.sin = math.cos(psi), math.sin(psi)
-        self.tilt = (ch * q1 + sh * q2, ch * q2 - sh * q1)  # vector part of q_z(-psi) ⊗ q
+        # vector part of q_h = q_z(-psi) ⊗ q, signed so that q_h0 >= 0 (psi and psi - 2 pi
+        # give opposite q_z: the same rotation, the opposite sign)
+        sign = 1.0 if ch * q0 + sh * q3 >= 0.0 else -1.0
+        self.tilt = (sign * (ch * q1 + sh * q2), sign * (ch * q2 - sh * q1))
         vx, vy, vz = (float(x) for x in estimate.velocity_body)
         # eCb v (eq. 2.20 read as body -> earth), then turned by -psi about the vertical
         n = ((q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) * vx + 2 * (q1 * q2 - q0 * q3) * vy

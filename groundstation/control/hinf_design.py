@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import importlib
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -56,7 +57,11 @@ class HinfWeights:
     eps : input weight in ``D12`` (eq. 10.5); reference_pole a_r [rad/s] and
     reference_gain k_r of ``W_r`` (default k_r = a_r: unit DC gain);
     noise_gain k_n, noise_zero b_n, noise_pole a_n [rad/s] of ``W_n``;
-    output_scale : (4,) weights on the [x, y, z, q3] errors in ``z``.
+    output_scale : (4,) weights on the [x, y, z, q3] errors in ``z``;
+    integral_scale : (4,) weights in ``z`` on the integrated [x, y, z, q3] errors
+        (beyond the thesis: integrator states ``x_i' = C_r x_r - C_s x_s`` are
+        appended, so the gain has integral action and holds zero steady-state
+        error under a thrust-map error or a wrong mass), or None: no integrators.
     """
 
     eps: float = 0.1
@@ -66,11 +71,13 @@ class HinfWeights:
     noise_zero: float = 1.0
     noise_pole: float = 100.0
     output_scale: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    integral_scale: tuple[float, float, float, float] | None = None
 
 
 @dataclass(frozen=True, slots=True)
 class StandardProblem:
-    """``A, B1, B2, C1, D11, D12, C2, D21`` of eq. 10.1 and the state partition sizes."""
+    """``A, B1, B2, C1, D11, D12, C2, D21`` of eq. 10.1 and the state partition sizes:
+    ``x = [x_s (n_s), x_r (n_r), x_n (n_n), x_i (n_i)]``."""
 
     A: FloatArray
     B1: FloatArray
@@ -83,6 +90,7 @@ class StandardProblem:
     n_s: int
     n_r: int
     n_n: int
+    n_i: int = 0
 
 
 def plant_model(params: QuadrotorParams, include_rate_loop: bool,
@@ -117,18 +125,69 @@ def standard_problem(A_s: FloatArray, B_s: FloatArray, weights: HinfWeights) -> 
     C2[np.ix_(H_OUTPUTS, range(n_s + p, n))] = np.eye(p)  # noise on the measured outputs
     D21 = np.zeros((n_s, 2 * p))
     D21[np.ix_(H_OUTPUTS, range(p, 2 * p))] = w.noise_gain * np.eye(p)
-    return StandardProblem(A, B1, B2, C1, np.zeros((p + m, 2 * p)), D12, C2, D21, n_s, p, p)
+    sp = StandardProblem(A, B1, B2, C1, np.zeros((p + m, 2 * p)), D12, C2, D21, n_s, p, p)
+    return sp if w.integral_scale is None else _with_integrators(sp, w.integral_scale)
 
 
-def solve_lmi(sp: StandardProblem, *, gamma: float | None = 1.0, objective: str = "feasibility",
-              margin: float = 1e-7, solver: str = "CLARABEL") -> FloatArray:
+def _with_integrators(sp: StandardProblem,
+                      scale: tuple[float, float, float, float]) -> StandardProblem:
+    """``sp`` with integrators of the four output errors appended to the state and
+    weighted by ``scale`` in the performance output."""
+    p = 4
+    n = sp.A.shape[0]
+    C_s = np.zeros((p, n))
+    C_s[np.arange(p), H_OUTPUTS] = 1.0
+    C_r = np.zeros((p, n))
+    C_r[:, sp.n_s:sp.n_s + p] = np.eye(p)
+    A = np.zeros((n + p, n + p))
+    A[:n, :n] = sp.A
+    A[n:, :n] = C_r - C_s
+    pad = np.zeros((p, sp.B1.shape[1]))
+    C1 = np.block([[sp.C1, np.zeros((sp.C1.shape[0], p))],
+                   [np.zeros((p, n)), np.diag(np.asarray(scale, dtype=float))]])
+    return StandardProblem(
+        A, np.vstack([sp.B1, pad]), np.vstack([sp.B2, np.zeros((p, sp.B2.shape[1]))]), C1,
+        np.vstack([sp.D11, np.zeros((p, sp.D11.shape[1]))]),
+        np.vstack([sp.D12, np.zeros((p, sp.D12.shape[1]))]),
+        np.hstack([sp.C2, np.zeros((sp.C2.shape[0], p))]), sp.D21, sp.n_s, sp.n_r, sp.n_n, p,
+    )
+
+
+def uncertainty_vertices(params: QuadrotorParams, rate_tau: float, weights: HinfWeights,
+                         rate_gain_range: float,
+                         tau_range: float) -> list[StandardProblem]:
+    """The standard problem at the vertices of the uncertainty box: every rate gain
+    scaled by ``1 -+ rate_gain_range`` (all three axes together: the hover model's
+    axes are decoupled, so this covers each axis on its own) and the rate-loop time
+    constant by ``1 -+ tau_range``. A gain that satisfies the LMI at every vertex with
+    one Lyapunov matrix is stable for every plant in between (quadratic stability)."""
+    out = []
+    for k in (1.0 - rate_gain_range, 1.0 + rate_gain_range):
+        for tau in (rate_tau * (1.0 - tau_range), rate_tau * (1.0 + tau_range)):
+            A_s, B_s = plant_model(params, True, tau)
+            B_s = B_s.copy()
+            B_s[9:12, 0:3] *= k
+            out.append(standard_problem(A_s, B_s, weights))
+    return out
+
+
+def solve_lmi(sp: StandardProblem | Sequence[StandardProblem], *, gamma: float | None = 1.0,
+              objective: str = "feasibility", margin: float = 1e-7, solver: str = "CLARABEL",
+              pole_radius: float | None = None) -> FloatArray:
     """Solve the LMI (eq. 10.12-10.17) with cvxpy; returns ``F = W Y⁻¹`` (m, n).
 
+    sp : the standard problem, or several (the vertices of an uncertainty box,
+    :func:`uncertainty_vertices`): the LMI is then imposed at each with the same
+    ``Y`` and ``W``, which makes the one gain stable, with the bound, on all of them.
     gamma : the bound; ``None`` minimises it (the optimum is degenerate: Y
     becomes singular and the gain unbounded, use it to find ``gamma_min`` only).
     objective : "feasibility" (any feasible point, as an LMI feasibility solver
     returns), or "min-gain": minimise ``|W|_F`` with ``Y >= I``, which bounds
     ``|F| <= |W|`` (the thesis aimed at "as low a feedback matrix as possible").
+    pole_radius : if given [rad/s], also keep the closed-loop poles inside the disc
+    of that radius centred on ``-pole_radius`` (Chilali and Gahinet's LMI region,
+    same ``Y``): the continuous design then asks for no loop faster than the
+    sampled, delayed command link can carry.
     Needs the optional ``hinf`` extra (cvxpy); ControlError without it or when
     the LMI is infeasible.
     """
@@ -138,20 +197,28 @@ def solve_lmi(sp: StandardProblem, *, gamma: float | None = 1.0, objective: str 
         raise ControlError("H-infinity synthesis needs cvxpy: pip install '.[hinf]'") from exc
     if objective not in ("feasibility", "min-gain"):
         raise ControlError(f"objective must be 'feasibility' or 'min-gain', found {objective!r}")
-    n, m = sp.B2.shape
-    nw, nz = sp.B1.shape[1], sp.C1.shape[0]
+    problems = [sp] if isinstance(sp, StandardProblem) else list(sp)
+    first = problems[0]
+    n, m = first.B2.shape
+    nw, nz = first.B1.shape[1], first.C1.shape[0]
     Y = cp.Variable((n, n), symmetric=True)
     W = cp.Variable((m, n))
     g = cp.Variable() if gamma is None else gamma
-    F11 = sp.A @ Y + Y @ sp.A.T + sp.B2 @ W + W.T @ sp.B2.T
-    F13 = Y @ sp.C1.T + W.T @ sp.D12.T
-    lmi = cp.bmat([
-        [F11, sp.B1, F13],
-        [sp.B1.T, -g * np.eye(nw), sp.D11.T],
-        [F13.T, sp.D11, -g * np.eye(nz)],
-    ])
     y_min = 1.0 if objective == "min-gain" and gamma is not None else margin
-    cons = [0.5 * (lmi + lmi.T) << -margin * np.eye(n + nw + nz), Y >> y_min * np.eye(n)]
+    cons = [Y >> y_min * np.eye(n)]
+    for v in problems:
+        AY = v.A @ Y + v.B2 @ W
+        F13 = Y @ v.C1.T + W.T @ v.D12.T
+        lmi = cp.bmat([
+            [AY + AY.T, v.B1, F13],
+            [v.B1.T, -g * np.eye(nw), v.D11.T],
+            [F13.T, v.D11, -g * np.eye(nz)],
+        ])
+        cons.append(0.5 * (lmi + lmi.T) << -margin * np.eye(n + nw + nz))
+        if pole_radius is not None:
+            r = pole_radius
+            disc = cp.bmat([[-r * Y, r * Y + AY], [(r * Y + AY).T, -r * Y]])
+            cons.append(0.5 * (disc + disc.T) << -margin * np.eye(2 * n))
     if gamma is None:
         goal = cp.Minimize(g)
     elif objective == "min-gain":

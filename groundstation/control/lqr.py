@@ -228,6 +228,9 @@ class LqrController:
             d = obs.update(xs, learn=self._learn)
             xs[3] += d[1] * self._half_inv_g  # hold the tilt that cancels d (eq. 4.22-4.23)
             xs[4] -= d[0] * self._half_inv_g
+            # and the thrust that cancels it: the inputs sent during the delay include that
+            # compensation, which is not the LQR's to correct
+            xs[N_VEHICLE + 3::4] += self.params.mass * d[2]
         self._update_reference_state(reference)
         self._integral.update(frame, xs, self._xi)
         u = np.dot(self._K, self._z, out=self._u)
@@ -257,9 +260,9 @@ class LqrController:
         f_lin = c * output.f_z + self._weight * (1.0 - c) if self._tilt_comp else output.f_z
         w = output.omega
         u = np.array([w[0], w[1], w[2], f_lin])
-        self._history.record(u)
         if self._observer is not None:
             self._observer.commit(u)
+        self._history.record(u)
         self._learn = automatic
 
     def _update_reference_state(self, reference: Reference) -> None:

@@ -54,7 +54,7 @@ class PidController:
         self,
         *,
         params: QuadrotorParams | None = None,
-        dt: float = 0.01,
+        dt: float = 0.02,
         position_kp: Sequence[float] = (0.8, 0.8, 1.2),
         velocity_kp: Sequence[float] = (0.25, 0.25, 4.0),
         velocity_ki: Sequence[float] = (0.05, 0.05, 1.5),

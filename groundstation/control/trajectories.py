@@ -4,7 +4,10 @@
 ``TrajectoryConfig.name``); :func:`trajectory_from_config` does the same from a
 ``TrajectoryConfig``. Frames: NED, so a height of 1 m is ``z = -1``; seen from
 above, x (north) points up and y (east) right, so clockwise is
-north -> east -> south -> west.
+north -> east -> south -> west. Headings: ``yaw=None`` keeps the heading the
+vehicle has at take-off (free heading), a number [rad] is absolute; a waypoint
+file's yaw column is absolute. These are the raw shapes;
+:func:`groundstation.control.shaping.shape_for_flight` makes them flyable.
 """
 
 from __future__ import annotations
@@ -16,7 +19,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from groundstation.control.trajectory import FigureEight, Hover, PiecewiseLinear, Trajectory
+from groundstation.control.trajectory import (
+    FigureEight,
+    Hover,
+    PiecewiseLinear,
+    Trajectory,
+    YawTurn,
+)
 from groundstation.errors import TrajectoryError
 from groundstation.types import FloatArray
 
@@ -25,7 +34,7 @@ if TYPE_CHECKING:
 
 TRAJECTORY_NAMES = (
     "hover", "step-x", "step-y", "step-z", "square", "yz-rectangle", "low-hover",
-    "figure-eight", "waypoints",
+    "figure-eight", "yaw-turn", "waypoints",
 )
 
 
@@ -35,6 +44,7 @@ def square(
     size_m: float = 0.75,
     period_s: float = 20.0,
     smoothing_s: float = 0.0,
+    yaw: float | None = None,
 ) -> PiecewiseLinear:
     """The Ch. 11.3 square: ``size_m`` x ``size_m`` horizontal, clockwise seen from above.
 
@@ -47,7 +57,8 @@ def square(
     corners = [(+h, -h), (+h, +h), (-h, +h), (-h, -h), (+h, -h)]  # NW, NE, SE, SW, NW
     points = np.array([[c[0] + dx, c[1] + dy, c[2]] for dx, dy in corners])
     times = np.linspace(0.0, period_s, 5)
-    return PiecewiseLinear(times, points, periodic=True, smoothing_s=smoothing_s, name="square")
+    return PiecewiseLinear(times, points, periodic=True, smoothing_s=smoothing_s, yaw=yaw,
+                           name="square")
 
 
 def yz_rectangle(
@@ -57,6 +68,7 @@ def yz_rectangle(
     height_m: float = 0.5,
     period_s: float = 20.0,
     smoothing_s: float = 0.0,
+    yaw: float | None = None,
 ) -> PiecewiseLinear:
     """The rectangle of Fig. 11.7 in the vertical y-z plane (x fixed).
 
@@ -73,16 +85,19 @@ def yz_rectangle(
     lengths = np.linalg.norm(np.diff(points, axis=0), axis=1)
     times = np.concatenate([[0.0], np.cumsum(lengths)]) * (period_s / float(np.sum(lengths)))
     return PiecewiseLinear(
-        times, points, periodic=True, smoothing_s=smoothing_s, name="yz-rectangle"
+        times, points, periodic=True, smoothing_s=smoothing_s, yaw=yaw, name="yz-rectangle"
     )
 
 
-def load_waypoints(path: str | Path, *, smoothing_s: float = 0.0) -> PiecewiseLinear:
+def load_waypoints(path: str | Path, *, smoothing_s: float = 0.0,
+                   yaw: float | None = None) -> PiecewiseLinear:
     """Read a CSV of ``t, x, y, z[, yaw]`` rows (s, NED m, rad) into an open path.
 
     A first content line that is not numeric is a header; blank lines and lines
     starting with ``#`` are skipped. Times are taken relative to the first
     row and must increase strictly; the path holds the last point at the end.
+    A yaw column gives absolute headings (unwrapped: a step across +-pi is the
+    short way); without one the heading is ``yaw`` [rad] (None: free heading).
     Raises TrajectoryError naming the line of any problem.
     """
     path = Path(path)
@@ -114,10 +129,10 @@ def load_waypoints(path: str | Path, *, smoothing_s: float = 0.0) -> PiecewiseLi
     if len(rows) < 2:
         raise TrajectoryError(f"{path}: needs at least 2 waypoints, found {len(rows)}")
     data = np.array(rows)
-    yaw: float | FloatArray = data[:, 4] if data.shape[1] == 5 else 0.0
+    headings: float | FloatArray | None = data[:, 4] if data.shape[1] == 5 else yaw
     try:
         return PiecewiseLinear(data[:, 0] - data[0, 0], data[:, 1:4], smoothing_s=smoothing_s,
-                               yaw=yaw, name="waypoints")
+                               yaw=headings, name="waypoints")
     except TrajectoryError as exc:
         raise TrajectoryError(f"{path}: {exc}") from None
 
@@ -133,6 +148,8 @@ def make_trajectory(
     low_height_m: float = 0.02,
     corner_smoothing_s: float = 0.0,
     file: str | Path | None = None,
+    yaw: float | None = None,
+    yaw_turn: float = 2.0 * math.pi,
 ) -> Trajectory:
     """Build a named trajectory (the names of ``TrajectoryConfig.name``).
 
@@ -142,37 +159,46 @@ def make_trajectory(
     yz-rectangle: Fig. 11.7 (width ``size_m``, height ``2/3 size_m``).
     low-hover: ``center`` in x, y at ``low_height_m`` above the floor (Ch. 11.4).
     figure-eight: lemniscate ``size_m`` wide, one lap per ``period_s``.
-    waypoints: the CSV ``file`` (see :func:`load_waypoints`).
+    yaw-turn: hold ``center`` while the heading turns by ``yaw_turn`` [rad] over
+    ``period_s``. waypoints: the CSV ``file`` (see :func:`load_waypoints`).
+    ``yaw`` [rad]: the heading (the start heading of yaw-turn); None keeps the
+    heading at take-off (free heading).
     """
     c = np.asarray(center, dtype=float)
     steps = {"step-x": (step_m, 0.0, 0.0), "step-y": (0.0, step_m, 0.0),
              "step-z": (0.0, 0.0, -step_m)}
     if name == "hover":
-        return Hover(c)
+        return Hover(c, yaw=yaw)
     if name in steps:
-        return Hover(c, step=list(steps[name]), step_time=step_time_s, name=name)
+        return Hover(c, step=list(steps[name]), step_time=step_time_s, yaw=yaw, name=name)
     if name == "square":
-        return square(c, size_m=size_m, period_s=period_s, smoothing_s=corner_smoothing_s)
+        return square(c, size_m=size_m, period_s=period_s, smoothing_s=corner_smoothing_s,
+                      yaw=yaw)
     if name == "yz-rectangle":
         return yz_rectangle(c, width_m=size_m, height_m=size_m * 2.0 / 3.0, period_s=period_s,
-                            smoothing_s=corner_smoothing_s)
+                            smoothing_s=corner_smoothing_s, yaw=yaw)
     if name == "low-hover":
-        return Hover([c[0], c[1], -low_height_m], name="low-hover")
+        return Hover([c[0], c[1], -low_height_m], yaw=yaw, name="low-hover")
     if name == "figure-eight":
-        return FigureEight(c, width_m=size_m, period_s=period_s)
+        return FigureEight(c, width_m=size_m, period_s=period_s, yaw=yaw)
+    if name == "yaw-turn":
+        return YawTurn(c, turn=yaw_turn, period_s=period_s, yaw=yaw)
     if name == "waypoints":
         if file is None:
             raise TrajectoryError("trajectory 'waypoints' needs a file")
-        return load_waypoints(file, smoothing_s=corner_smoothing_s)
+        return load_waypoints(file, smoothing_s=corner_smoothing_s, yaw=yaw)
     raise TrajectoryError(f"unknown trajectory {name!r}; known: {', '.join(TRAJECTORY_NAMES)}")
 
 
 def trajectory_from_config(config: TrajectoryConfig, **overrides: Any) -> Trajectory:
-    """:func:`make_trajectory` with the fields of a ``TrajectoryConfig``."""
+    """:func:`make_trajectory` with the fields of a ``TrajectoryConfig`` (degrees of
+    ``yaw_deg`` and ``yaw_turn_deg`` in radians); the raw shape, not yet shaped."""
     params: dict[str, Any] = {
         "center": config.center, "size_m": config.size_m, "period_s": config.period_s,
         "step_m": config.step_m, "low_height_m": config.low_height_m,
         "corner_smoothing_s": config.corner_smoothing_s, "file": config.file,
+        "yaw": None if config.yaw_deg is None else math.radians(config.yaw_deg),
+        "yaw_turn": math.radians(config.yaw_turn_deg),
     }
     params.update(overrides)
     return make_trajectory(config.name, **params)

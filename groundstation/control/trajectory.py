@@ -1,11 +1,17 @@
-"""Trajectory primitives: a reference position, velocity and acceleration at any time.
+"""Trajectory primitives: a reference position and its derivatives at any time.
 
 Every trajectory is a pure function of the time since it started; it holds no
 clock and no state, so the loop, the tests and the feasibility check can sample
 it anywhere (:class:`Trajectory` protocol). Positions are NED [m] (hovering 1 m
-above the floor is ``z = -1``), velocities [m/s], accelerations [m/s^2].
+above the floor is ``z = -1``), velocities [m/s], accelerations [m/s^2], jerks
+[m/s^3], headings [rad] and heading rates [rad/s]; every derivative is exact.
 
-The shapes of thesis Ch. 11 are built from three primitives:
+Heading: a trajectory built with ``yaw=None`` has a *free heading*
+(``free_heading`` True): its yaw (0 unless it turns) is relative to the heading
+the vehicle has at take-off, which the mission adds. A number is an absolute
+heading. Headings are continuous (unwrapped): they may pass +-pi.
+
+The shapes of thesis Ch. 11 (and the heading turn) are built from these primitives:
 
 * :class:`Hover`: a fixed point, optionally with a step of the set point.
 * :class:`PiecewiseLinear`: straight segments at constant speed between knots
@@ -17,6 +23,9 @@ The shapes of thesis Ch. 11 are built from three primitives:
   velocities, so the corners become parabolic blends with a bounded
   acceleration ``|Δv| / T`` while the straight parts are untouched.
 * :class:`FigureEight`: a smooth lemniscate of Gerono with analytic derivatives.
+* :class:`YawTurn`: hold a point while the heading turns (min-jerk profile).
+
+:mod:`groundstation.control.shaping` makes any of them flyable before flight.
 """
 
 from __future__ import annotations
@@ -26,6 +35,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from groundstation.control.minjerk import smoothstep
 from groundstation.errors import TrajectoryError
 from groundstation.types import FloatArray, Reference
 
@@ -39,11 +49,14 @@ class Trajectory(Protocol):
     ``duration`` [s] is the length of the interesting part: one lap for a
     periodic trajectory (it repeats afterwards), the end of the last segment
     for an open one (it holds its last point afterwards), ``0`` for a hover.
+    ``free_heading``: True when the yaw is relative to the heading at take-off
+    (the mission adds that heading), False when it is absolute.
     """
 
     name: str
     duration: float
     periodic: bool
+    free_heading: bool
 
     def sample(self, t: float) -> Reference:
         """The reference at ``t`` seconds after the start (NED, SI units)."""
@@ -57,12 +70,22 @@ def _vec3(value: FloatArray | list[float] | tuple[float, ...], what: str) -> Flo
     return arr
 
 
+def _heading(yaw: float | None) -> tuple[float, bool]:
+    """(yaw [rad], free_heading) of a ``yaw`` argument (None = free heading, yaw 0)."""
+    if yaw is None:
+        return 0.0, True
+    if not math.isfinite(yaw):
+        raise TrajectoryError(f"yaw must be finite, found {yaw!r}")
+    return float(yaw), False
+
+
 class Hover:
     """Hold ``point``; optionally step by ``step`` at ``step_time`` (a set-point change).
 
-    point : (3,) NED [m]; step : (3,) NED offset [m]; step_time [s]; yaw [rad].
-    The step is a discontinuity: velocity and acceleration stay zero, so the
-    controller sees a pure set-point change as in the thesis's Fig. 11.4.
+    point : (3,) NED [m]; step : (3,) NED offset [m]; step_time [s]; yaw [rad]
+    (None: free heading). The step is a discontinuity: velocity, acceleration and
+    jerk stay zero, so the controller sees a pure set-point change as in the
+    thesis's Fig. 11.4 (shaping leaves it: it is the test).
     """
 
     periodic = False
@@ -73,7 +96,7 @@ class Hover:
         *,
         step: FloatArray | list[float] | None = None,
         step_time: float = 1.0,
-        yaw: float = 0.0,
+        yaw: float | None = None,
         name: str = "hover",
     ) -> None:
         self.name = name
@@ -83,10 +106,10 @@ class Hover:
             raise TrajectoryError(f"step_time must be a finite time >= 0 s, found {step_time!r}")
         self._t_step = float(step_time)
         self.duration = self._t_step if step is not None else 0.0
-        self._yaw = float(yaw)
+        self._yaw, self.free_heading = _heading(yaw)
 
     def sample(self, t: float) -> Reference:
-        """Set point before / after the step; zero velocity and acceleration."""
+        """Set point before / after the step; zero velocity, acceleration and jerk."""
         p = self._p0 if t < self._t_step else self._p1
         return Reference(t=t, position=p.copy(), velocity=np.zeros(3),
                          acceleration=np.zeros(3), yaw=self._yaw)
@@ -102,11 +125,13 @@ class PiecewiseLinear:
     smoothing_s : width T [s] of the moving-average window that rounds the
         corners (0 = sharp corners as flown in the thesis); must be shorter
         than the shortest segment
-    yaw : constant heading [rad], or (N,) headings at the knots [rad],
-        interpolated linearly (not smoothed)
+    yaw : None (free heading, yaw 0), a constant heading [rad], or (N,) headings
+        at the knots [rad], unwrapped (a step of more than pi between knots is
+        taken the short way) and interpolated linearly (not smoothed)
 
     Before the first knot an open path holds ``points[0]``, after the last it
-    holds ``points[-1]``.
+    holds ``points[-1]``. :func:`groundstation.control.shaping.min_jerk_path`
+    flies the same knots with a smooth time-scaling per segment.
     """
 
     def __init__(
@@ -116,12 +141,12 @@ class PiecewiseLinear:
         *,
         periodic: bool = False,
         smoothing_s: float = 0.0,
-        yaw: float | FloatArray = 0.0,
+        yaw: float | FloatArray | None = None,
         name: str = "path",
     ) -> None:
         t = np.asarray(times, dtype=float).reshape(-1)
         p = np.asarray(points, dtype=float)
-        _check_knots(t, p, periodic)
+        check_knots(t, p, periodic)
         self.name = name
         self.periodic = periodic
         self.duration = float(t[-1])
@@ -139,18 +164,30 @@ class PiecewiseLinear:
                 f"segment ({float(np.min(np.diff(t))):g} s)"
             )
         self.smoothing_s = float(smoothing_s)
-        yaws = np.broadcast_to(np.asarray(yaw, dtype=float), t.shape)
-        if not np.all(np.isfinite(yaws)):
-            raise TrajectoryError("yaw must be finite")
-        self._yaws = np.array(yaws)
-        self._constant_yaw = bool(np.all(yaws == yaws[0]))
+        self._yaws, self.free_heading = knot_headings(yaw, t.size)
+        self._yaw_rates: FloatArray = np.diff(self._yaws) / np.diff(t)
 
-    def _yaw(self, t: float) -> float:
-        if self._constant_yaw:
-            return float(self._yaws[0])
-        i, tau, _ = self._locate(t)
-        frac = tau / (self._t[i + 1] - self._t[i])
-        return float(self._yaws[i] + frac * (self._yaws[i + 1] - self._yaws[i]))
+    @property
+    def times(self) -> FloatArray:
+        """(N,) knot times [s] (a copy)."""
+        return self._t.copy()
+
+    @property
+    def points(self) -> FloatArray:
+        """(N, 3) knot positions, NED [m] (a copy)."""
+        return self._p.copy()
+
+    @property
+    def yaws(self) -> FloatArray:
+        """(N,) knot headings [rad], unwrapped (a copy)."""
+        return self._yaws.copy()
+
+    def _yaw(self, t: float) -> tuple[float, float]:
+        """Heading [rad] and its rate [rad/s] at ``t`` (continuous across laps)."""
+        i, tau, laps = self._locate(t)
+        yaw = self._yaws[i] + self._yaw_rates[i] * tau + laps * (self._yaws[-1] - self._yaws[0])
+        moving = self.periodic or 0.0 <= t < self.duration
+        return float(yaw), float(self._yaw_rates[i]) if moving else 0.0
 
     # -- exact piecewise evaluation of p, v and the antiderivative of p
     def _locate(self, t: float) -> tuple[int, float, float]:
@@ -192,17 +229,31 @@ class PiecewiseLinear:
     def sample(self, t: float) -> Reference:
         """Position, velocity and acceleration at ``t`` (smoothed if ``smoothing_s`` > 0)."""
         big_t = self.smoothing_s
+        yaw, yaw_rate = self._yaw(t)
         if big_t == 0.0:
             return Reference(t=t, position=self._pos(t), velocity=self._vel(t).copy(),
-                             acceleration=np.zeros(3), yaw=self._yaw(t))
+                             acceleration=np.zeros(3), yaw=yaw, yaw_rate=yaw_rate)
         lo, hi = t - 0.5 * big_t, t + 0.5 * big_t
         pos = (self._antiderivative(hi) - self._antiderivative(lo)) / big_t
         vel = (self._pos(hi) - self._pos(lo)) / big_t  # _pos holds the end points
         acc = (self._vel(hi) - self._vel(lo)) / big_t
-        return Reference(t=t, position=pos, velocity=vel, acceleration=acc, yaw=self._yaw(t))
+        # the moving average's acceleration is piecewise constant: its jerk is 0 where
+        # defined (impulses at the window's edges are not representable)
+        return Reference(t=t, position=pos, velocity=vel, acceleration=acc, yaw=yaw,
+                         yaw_rate=yaw_rate)
 
 
-def _check_knots(t: FloatArray, p: FloatArray, periodic: bool) -> None:
+def knot_headings(yaw: float | FloatArray | None, n: int) -> tuple[FloatArray, bool]:
+    """(n,) unwrapped knot headings [rad] and free_heading from a ``yaw`` argument."""
+    if yaw is None:
+        return np.zeros(n), True
+    yaws = np.broadcast_to(np.asarray(yaw, dtype=float), (n,))
+    if not np.all(np.isfinite(yaws)):
+        raise TrajectoryError("yaw must be finite")
+    return np.unwrap(yaws), False
+
+
+def check_knots(t: FloatArray, p: FloatArray, periodic: bool) -> None:
     """Raise TrajectoryError unless the knots describe a valid path."""
     if t.ndim != 1 or t.size < 2:
         raise TrajectoryError(f"a path needs at least 2 knots, found {t.size}")
@@ -227,8 +278,10 @@ class FigureEight:
 
     ``y = a sin(w t)``, ``x = (a / 2) sin(2 w t)`` with ``w = 2 pi / period``,
     centred on ``center`` (NED [m]): the figure is ``2a`` wide along y (east) and
-    ``a`` along x (north) and starts at the centre heading north-east.
-    Velocity and acceleration are the exact derivatives.
+    ``a`` along x (north) and starts at the centre heading north-east, at speed
+    ``sqrt(2) a w`` (not at rest: :mod:`~groundstation.control.shaping` eases it in
+    and out). Velocity, acceleration and jerk are the exact derivatives; yaw
+    constant (None: free heading).
     """
 
     periodic = True
@@ -239,7 +292,7 @@ class FigureEight:
         *,
         width_m: float = 1.0,
         period_s: float = 20.0,
-        yaw: float = 0.0,
+        yaw: float | None = None,
         name: str = "figure-eight",
     ) -> None:
         if not (width_m > 0.0 and period_s > 0.0):
@@ -251,10 +304,10 @@ class FigureEight:
         self._c = _vec3(center, "figure-eight centre")
         self._a = 0.5 * float(width_m)
         self._w = 2.0 * math.pi / float(period_s)
-        self._yaw = float(yaw)
+        self._yaw, self.free_heading = _heading(yaw)
 
     def sample(self, t: float) -> Reference:
-        """Exact position, velocity and acceleration of the lemniscate at ``t``."""
+        """Exact position, velocity, acceleration and jerk of the lemniscate at ``t``."""
         a, w = self._a, self._w
         s1, c1 = math.sin(w * t), math.cos(w * t)
         s2, c2 = math.sin(2 * w * t), math.cos(2 * w * t)
@@ -264,3 +317,40 @@ class FigureEight:
         jerk = np.array([-4.0 * a * w ** 3 * c2, -a * w ** 3 * c1, 0.0])
         return Reference(t=t, position=pos, velocity=vel, acceleration=acc, yaw=self._yaw,
                          jerk=jerk)
+
+
+class YawTurn:
+    """Hold ``center`` while the heading turns by ``turn`` [rad] over ``period_s``.
+
+    The heading follows the min-jerk profile ``yaw + turn * S(t / period_s)``
+    (:func:`~groundstation.control.minjerk.smoothstep`): it starts and ends at rest,
+    with the peak rate ``15/8 * turn / period_s``. ``yaw`` [rad] is the heading at
+    the start (None: free heading, the turn is relative to the heading at take-off).
+    Open: afterwards the heading holds at ``yaw + turn``.
+    """
+
+    periodic = False
+
+    def __init__(
+        self,
+        center: FloatArray | list[float],
+        *,
+        turn: float = 2.0 * math.pi,
+        period_s: float = 20.0,
+        yaw: float | None = None,
+        name: str = "yaw-turn",
+    ) -> None:
+        if not (math.isfinite(turn) and period_s > 0.0):
+            raise TrajectoryError(
+                f"yaw-turn needs a finite turn and period_s > 0, found {turn!r}, {period_s!r}")
+        self.name = name
+        self.duration = float(period_s)
+        self._c = _vec3(center, "yaw-turn centre")
+        self._turn = float(turn)
+        self._yaw, self.free_heading = _heading(yaw)
+
+    def sample(self, t: float) -> Reference:
+        """The centre at rest; the heading and its rate at ``t``."""
+        s, ds, _, _ = smoothstep(t / self.duration)
+        return Reference(t=t, position=self._c.copy(), velocity=np.zeros(3),
+                         yaw=self._yaw + self._turn * s, yaw_rate=self._turn * ds / self.duration)

@@ -1,4 +1,5 @@
-"""The suite's figures, mirroring thesis Ch. 11 (Fig. 11.1-11.8) plus the fault scenarios.
+"""The suite's figures, mirroring thesis Ch. 11 (Fig. 11.1-11.8) plus the fault scenarios
+(issue 13's flights: :mod:`groundstation.evaluation.figures_issue13`).
 
 Each function takes the flights by scenario name (see
 :mod:`groundstation.evaluation.scenarios`) and writes one PNG; a figure whose
@@ -15,7 +16,14 @@ from pathlib import Path
 import numpy as np
 
 from groundstation.control.simulate import SimResult
-from groundstation.evaluation.metrics import error_norms, lap_mean, tilt_deg, track_clock
+from groundstation.evaluation.figures_issue13 import issue13_figures
+from groundstation.evaluation.metrics import (
+    error_norms,
+    heading_deg,
+    lap_mean,
+    tilt_deg,
+    track_clock,
+)
 from groundstation.evaluation.plotting import (
     EST_STYLE,
     REF_STYLE,
@@ -295,25 +303,33 @@ def thrust_error(records: Records, out: Path) -> list[Path]:
 
 
 def hinf(records: Records, out: Path, tilt_limit_deg: float = 35.0) -> list[Path]:
-    """The two H-infinity designs: tilt and height from take-off."""
+    """The two H-infinity designs (and the rate-loop design with rate gains 30 % off, when
+    flown): tilt, height and heading from take-off."""
     names = ("hinf-thesis-model", "hinf-rate-loop-model")
     if not _have(records, names):
         return []
     plt = pyplot()
-    fig, (tx, hx) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
-    labels = ("designed on the thesis's model", "designed with the rate-loop lag")
-    for k, (name, label) in enumerate(zip(names, labels, strict=True)):
+    fig, (tx, hx, yx) = plt.subplots(3, 1, figsize=(10, 9.5), sharex=True)
+    labels = ["designed on the thesis's model", "designed with the rate-loop lag"]
+    extra = [(n, f"with the lag, rate gains 30 % {n.rsplit('-', 1)[1]}")
+             for n in ("hinf-rate-gains-low", "hinf-rate-gains-high") if n in records]
+    colors = ("C0", "C1", "C2", "C4")  # C3 is the tilt limit
+    for color, (name, label) in zip(colors, [*zip(names, labels, strict=True), *extra],
+                                    strict=False):
         r = records[name]
         air = r.during(*AIRBORNE)
         t = r.t - r.entered(State.TAKEOFF)
-        tx.plot(t[air], tilt_deg(r.attitude[air]), color=f"C{k}", label=label)
-        hx.plot(t[air], -r.position[air, 2], color=f"C{k}", label=label)
+        tx.plot(t[air], tilt_deg(r.attitude[air]), color=color, label=label)
+        hx.plot(t[air], -r.position[air, 2], color=color, label=label)
+        yx.plot(t[air], np.degrees(np.unwrap(np.radians(heading_deg(r.attitude[air])))),
+                color=color, label=label)
     tx.axhline(tilt_limit_deg, color="C3", ls="--", lw=1, label="supervisor tilt limit")
     tx.set(ylabel="tilt [deg]", ylim=(0.0, None))
-    hx.set(xlabel="time since take-off [s]", ylabel="height -z [m]")
-    for ax in (tx, hx):
+    hx.set(ylabel="height -z [m]")
+    yx.set(xlabel="time since take-off [s]", ylabel="heading [deg] (reference: held)")
+    for ax in (tx, hx, yx):
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8)
+    tx.legend(fontsize=8)
     fig.suptitle("H-infinity in the virtual lab (cf. thesis Ch. 10.3: the design without the "
                  "on-board dynamics does not hover)")
     return [save(fig, out / "hinf.png")]
@@ -331,6 +347,7 @@ def all_figures(records: Records, models: Mapping[str, SimResult], out: Path,
         lambda: square(records, out, period_s), lambda: yz_rectangle(records, out, period_s),
         lambda: low_hover(records, out), lambda: outage(records, out),
         lambda: thrust_error(records, out), lambda: hinf(records, out),
+        lambda: issue13_figures(records, out),
     ]
     paths: list[Path] = []
     for make in makers:

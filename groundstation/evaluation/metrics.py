@@ -12,7 +12,10 @@ flight was flown. Positions are NED [m], times [s], quaternions scalar-first.
 * step figures: overshoot and the 2 % settling time
   (:func:`groundstation.control.metrics.step_metrics` with ``band = 0.02``);
 * tilt from a quaternion, percentiles of per-tick timings, and the lap mean
-  of a periodic path (thesis Fig. 11.5 shows the mean of five laps).
+  of a periodic path (thesis Fig. 11.5 shows the mean of five laps);
+* distance off a path: each point's distance to a polyline (the densely sampled
+  reference), exact, found through a k-d tree of the polyline's vertices;
+* heading (3-2-1 Euler yaw) from a quaternion and wrapped heading errors.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import math
 
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial import cKDTree
 
 from groundstation.control.metrics import StepMetrics, step_metrics, time_lag
 from groundstation.types import FloatArray
@@ -159,3 +163,77 @@ def lap_mean(clock: FloatArray, path: FloatArray, period_s: float, laps: int,
         for j in range(p.shape[1]):
             acc[:, j] += np.interp(phase + k * period_s, ck, pk[:, j])
     return phase, acc / laps
+
+
+PATH_SEGMENT_M = 0.005
+"""Polyline segments longer than this are split before the k-d tree is built [m]
+(collinear vertices: the path is unchanged; the candidate search needs short segments)."""
+
+
+def _densify(vertices: FloatArray, max_len: float) -> FloatArray:
+    """``vertices`` (M, d) without repeated consecutive vertices, every segment split into
+    equal parts no longer than ``max_len``: the same polyline."""
+    v = np.asarray(vertices, dtype=float)
+    v = v[np.r_[True, np.any(np.diff(v, axis=0) != 0.0, axis=1)]]
+    if len(v) < 2:
+        return v
+    seg = np.diff(v, axis=0)
+    parts = np.maximum(1, np.ceil(np.linalg.norm(seg, axis=1) / max_len)).astype(int)
+    if np.all(parts == 1):
+        return v
+    k = np.repeat(np.arange(len(seg)), parts)
+    frac = np.concatenate([np.arange(n) / n for n in parts])
+    return np.vstack([v[k] + frac[:, None] * seg[k], v[-1:]])
+
+
+def _segment_distances(p: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
+    """Row-wise distance from points ``p`` to segments ``a``-``b`` (all (K, d))."""
+    ab, ap = b - a, p - a
+    ab2 = np.einsum("ij,ij->i", ab, ab)
+    u = np.clip(np.einsum("ij,ij->i", ap, ab) / np.where(ab2 > 0.0, ab2, 1.0), 0.0, 1.0)
+    d = ap - u[:, None] * ab
+    return np.asarray(np.sqrt(np.einsum("ij,ij->i", d, d)))
+
+
+def path_distances(points: FloatArray, polyline: FloatArray) -> FloatArray:
+    """Distance [m] from each of (N, d) ``points`` to the polyline through (M, d) vertices.
+
+    Exact: after splitting segments to at most :data:`PATH_SEGMENT_M` (``L``), a segment
+    whose closest point lies within ``e`` of a point has a vertex within ``e + L / 2``;
+    with ``e`` the distance to the nearest vertex, the segments next to the vertices in
+    that ball hold the answer. One vertex: distances to it; no vertex: NaN.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, np.shape(polyline)[-1])
+    v = _densify(np.asarray(polyline, dtype=float), PATH_SEGMENT_M)
+    if len(v) == 0 or len(p) == 0:
+        return np.full(len(p), math.nan)
+    if len(v) == 1:
+        return np.asarray(np.linalg.norm(p - v[0], axis=1))
+    tree = cKDTree(v)
+    nearest, _ = tree.query(p)
+    longest = float(np.max(np.linalg.norm(np.diff(v, axis=0), axis=1)))
+    balls = tree.query_ball_point(p, nearest + 0.5 * longest + 1e-12)
+    counts = np.fromiter((len(b) for b in balls), dtype=int, count=len(p))
+    vertex = np.concatenate([np.asarray(b, dtype=int) for b in balls])
+    who = np.repeat(np.arange(len(p)), counts)
+    before = np.clip(vertex - 1, 0, len(v) - 2)  # the segments ending and starting there
+    after = np.minimum(vertex, len(v) - 2)
+    d = np.minimum(_segment_distances(p[who], v[before], v[before + 1]),
+                   _segment_distances(p[who], v[after], v[after + 1]))
+    out = np.full(len(p), np.inf)
+    np.minimum.at(out, who, d)
+    return out
+
+
+def heading_deg(q: FloatArray) -> FloatArray:
+    """Heading (3-2-1 Euler yaw, from north towards east) [deg] in (-180, 180] of (N, 4)
+    scalar-first quaternions: ``atan2(2 (q1 q2 + q0 q3), q0^2 + q1^2 - q2^2 - q3^2)``."""
+    q = np.asarray(q, dtype=float)
+    return np.asarray(np.degrees(np.arctan2(
+        2.0 * (q[:, 1] * q[:, 2] + q[:, 0] * q[:, 3]),
+        q[:, 0] ** 2 + q[:, 1] ** 2 - q[:, 2] ** 2 - q[:, 3] ** 2)))
+
+
+def wrap_deg(angle: FloatArray) -> FloatArray:
+    """Angles [deg] wrapped into [-180, 180)."""
+    return np.asarray((np.asarray(angle, dtype=float) + 180.0) % 360.0 - 180.0)

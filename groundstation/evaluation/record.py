@@ -51,6 +51,7 @@ class FlightRecord:
         None (in-process: no schedule); NaN where not measured
     transitions : supervisor transitions (reasons empty when derived from a log)
     timing_source, truth_source : how the timing and the "true" position were obtained
+    ref_yaw : (N,) reference heading [rad] (NaN where there is none), or None if unknown
     """
 
     t: FloatArray
@@ -69,6 +70,7 @@ class FlightRecord:
     timing_source: str
     truth_source: str
     meta: dict[str, Any] = field(default_factory=dict)
+    ref_yaw: FloatArray | None = None
 
     @property
     def has_truth(self) -> bool:
@@ -101,12 +103,13 @@ class FlightRecord:
 
 
 def record_from_trace(result: FlightResult, compute_s: FloatArray,
-                      vicon: FloatArray) -> FlightRecord:
+                      vicon: FloatArray, ref_yaw: FloatArray | None = None) -> FlightRecord:
     """A record of an in-process flight.
 
     result : the flight's :class:`~groundstation.loop.inprocess.FlightResult`
     compute_s : (N,) per-tick cost of ``FlightCore.tick`` [s], one per trace row
     vicon : (M, 4) rows ``[t, x, y, z]`` of the poses handed to the core
+    ref_yaw : (N,) reference heading per trace row [rad] (the trace does not keep it)
     """
     tr = result.trace
     v = np.asarray(vicon, dtype=float).reshape(-1, 4)
@@ -122,6 +125,7 @@ def record_from_trace(result: FlightResult, compute_s: FloatArray,
         compute_s=np.asarray(compute_s, dtype=float), jitter_s=None, latency_s=None,
         transitions=tuple(result.transitions), timing_source=TIMING_FAST,
         truth_source=TRUTH_LAB,
+        ref_yaw=np.asarray(ref_yaw, dtype=float) if ref_yaw is not None else None,
     )
 
 
@@ -195,4 +199,5 @@ def record_from_log(log: str | Path, truth_file: str | Path | None = None) -> Fl
         truth_source=TRUTH_LAB if true_pos is not None else TRUTH_NONE,
         meta={"log": str(log), "version": meta.get("version"),
               "start_time": meta.get("start_time")},
+        ref_yaw=np.array(rows["ref_yaw"], dtype=float),
     )

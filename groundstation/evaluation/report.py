@@ -28,9 +28,13 @@ from groundstation.loop.supervisor import State, Transition
 COLUMNS: tuple[tuple[str, str, float, str], ...] = (
     ("rms_m", "RMS [cm]", 100.0, ".2f"),
     ("max_m", "max [cm]", 100.0, ".2f"),
+    ("off_path_rms_m", "off path RMS [cm]", 100.0, ".2f"),
+    ("corner_m", "corner [cm]", 100.0, ".2f"),
     ("lag_s", "lag [s]", 1.0, ".3f"),
     ("overshoot_pct", "overshoot [%]", 1.0, ".1f"),
     ("settling_s", "settling 2 % [s]", 1.0, ".2f"),
+    ("heading_rms_deg", "heading RMS [deg]", 1.0, ".2f"),
+    ("heading_end_deg", "heading end [deg]", 1.0, ".2f"),
     ("est_rms_m", "est. RMS [cm]", 100.0, ".2f"),
     ("est_max_m", "est. max [cm]", 100.0, ".2f"),
     ("hold_s", "HOLD [s]", 1.0, ".2f"),
@@ -47,11 +51,16 @@ DEFINITIONS = f"""\
 Definitions. Errors are Euclidean distances between the position and the reference
 (NED), over the supervisor's TRACK phase after its first 2 s of trajectory time
 (the end of the take-off); "position" is the virtual lab's ground truth unless a
-row says otherwise. Lag: delay of the position behind the reference that maximises
+row says otherwise. Off path: RMS distance of the same positions to the reference path
+(the reference positions of one lap as a polyline), whatever the timing. Corner (squares):
+the largest, over the four corners, of the closest approach of the flown path to the
+corner. Lag: delay of the position behind the reference that maximises
 their cross-correlation, over the axes on which the reference moves, refined below
 one tick by a parabola through the peak (blank for hover and steps).
 Overshoot and settling time: step flights, on the stepped axis, settling to within
-{100 * SETTLING_BAND:g} % of the step. Est.: estimate against truth over the same window.
+{100 * SETTLING_BAND:g} % of the step. Heading: truth against the reference heading,
+wrapped; RMS over the window and its size at the end of tracking.
+Est.: estimate against truth over the same window.
 HOLD: time spent holding on the IMU estimate. Max tilt: while airborne, from truth.
 Tick p50/p99: time per flight-core tick (see "timing" above for how it was measured).
 """
@@ -101,14 +110,18 @@ def cell(metrics: Mapping[str, Any], key: str, scale: float, fmt: str) -> str:
 
 
 def metrics_table(leading: Sequence[str], rows: Sequence[tuple[Sequence[str], Mapping[str, Any]]],
-                  real_time: bool) -> str:
+                  real_time: bool, seed_of: Sequence[Mapping[str, int]] | None = None) -> str:
     """A Markdown table: the ``leading`` columns, then :data:`COLUMNS` (and the real-time
-    ones). rows : (leading cells as text, metrics) per row."""
+    ones). rows : (leading cells as text, metrics) per row; seed_of : per row, the seed
+    that gave each figure (worst case over perturbed plants), shown as ``(s3)``."""
     cols = COLUMNS + (REAL_TIME_COLUMNS if real_time else ())
     head = [*leading, *(heading for _, heading, _, _ in cols)]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for lead, m in rows:
+    for k, (lead, m) in enumerate(rows):
+        seeds = seed_of[k] if seed_of is not None else {}
         values = [cell(m, key, scale, fmt) for key, _, scale, fmt in cols]
+        values = [f"{v} (s{seeds[key]})" if v and key in seeds else v
+                  for v, (key, _, _, _) in zip(values, cols, strict=True)]
         lines.append("| " + " | ".join([*lead, *values]) + " |")
     return "\n".join(lines) + "\n"
 

@@ -56,12 +56,14 @@ SIM_START_TIMEOUT_S = 20.0
 
 
 class _TickProbe:
-    """Stands in for ``FlightCore.tick``: times each call and keeps the Vicon poses."""
+    """Stands in for ``FlightCore.tick``: times each call and keeps the Vicon poses and the
+    reference heading (the in-process trace has no column for it)."""
 
     def __init__(self, core: FlightCore) -> None:
         self._tick = core.tick
         self.compute: list[float] = []
         self.vicon: list[tuple[float, float, float, float]] = []
+        self.ref_yaw: list[float] = []
 
     def __call__(self, t: float, imu: ImuSample | None, poses: Sequence[Pose],
                  vehicle: VehicleStatus, health: InputHealth,
@@ -69,6 +71,7 @@ class _TickProbe:
         start = time.perf_counter()
         result = self._tick(t, imu, poses, vehicle, health, stop_requests)
         self.compute.append(time.perf_counter() - start)
+        self.ref_yaw.append(result.reference.yaw)
         for pose in poses:
             p = pose.position
             self.vicon.append((pose.t, float(p[0]), float(p[1]), float(p[2])))
@@ -84,7 +87,8 @@ def run_in_process(scenario: Scenario, base: GroundStationConfig) -> FlightRecor
     probe = _TickProbe(flight.core)
     flight.core.tick = probe  # type: ignore[method-assign]  # timing wrapper, same signature
     result = flight.run(max_time_s=scenario.duration_s + MARGIN_S)
-    return record_from_trace(result, np.array(probe.compute), np.array(probe.vicon))
+    return record_from_trace(result, np.array(probe.compute), np.array(probe.vicon),
+                             np.array(probe.ref_yaw))
 
 
 def free_udp_port() -> int:

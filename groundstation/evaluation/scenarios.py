@@ -1,4 +1,4 @@
-"""The evaluation suite as data: the flights of thesis Ch. 11 (and the issue's additions).
+"""The evaluation suite as data: the flights of thesis Ch. 11 and the additions of issue 13.
 
 A :class:`Scenario` names a trajectory, a controller, the Vicon rate, how long the
 trajectory is flown and the configuration overrides that inject faults. The
@@ -15,7 +15,23 @@ Choices where the thesis leaves room (each stated in the report):
 * faults are configuration (``sim.vicon.outages`` in lab time,
   ``sim.thrust_scale``), so a real-time flight gets them too;
 * the tracking metrics skip the first ``settle_s`` of tracking (the end of the
-  take-off, which is judged to 10 cm).
+  take-off, which is judged to 10 cm);
+* the Ch. 11 flights fly the thesis's raw references (``trajectory.shaping: none``:
+  sharp corners, set-point steps), so they stay comparable with the thesis.
+
+Issue 13's flights (:data:`ISSUE13`) fly the new default controller ``lqr-ff`` on
+shaped references (``trajectory.shaping: min-jerk``), at several headings:
+
+* figure-eight 1.2 m x 0.6 m, 8 s per lap, 4 laps, scored after the first lap;
+* a 360 degree yaw turn in 20 s holding position;
+* the square at heading 0 and 135 degrees (the vehicle placed at that heading);
+* take-off from 2 cm north of the hover point's x/y at heading 135 degrees, and hovers at
+  headings 90, 180 and 270 degrees, each with free heading (``trajectory.yaw_deg`` null:
+  the heading the vehicle was placed at);
+* the PID and the thesis's two LQRs on the figure-eight and the shaped square;
+* the H-infinity design with the rate-loop lag on a plant whose rate gains are 30 %
+  low and 30 % high; under ``--perturb`` the H-infinity hovers take only the drawn rate
+  gains (:data:`RATE_GAINS_ONLY`), every other flight the whole drawn plant.
 """
 
 from __future__ import annotations
@@ -23,6 +39,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from groundstation.config import GroundStationConfig, apply_overrides
 from groundstation.control.hinf import default_gain_path
@@ -38,8 +56,29 @@ OUTAGE_START_S = 17.0
 """Lab time of the Vicon outage [s]: about 7.5 s into the square (take-off ends near
 9.5 s), halfway along its east edge, flown southwards."""
 
-CONTROLLERS = ("pid", "lqr-cp", "lqr-cv", "hinf-thesis", "hinf-rate-loop")
+CONTROLLERS = ("pid", "lqr-cp", "lqr-cv", "lqr-ff", "hinf-thesis", "hinf-rate-loop")
 """Controller names: the configuration's types plus the two stored H-infinity designs."""
+
+RAW: dict[str, Any] = {"trajectory.shaping": "none"}
+"""The thesis's reference as it is (Ch. 11 flights)."""
+
+SHAPED: dict[str, Any] = {"trajectory.shaping": "min-jerk"}
+"""The reference made flyable before flight (issue 13 flights)."""
+
+PERIODIC = ("square", "yz-rectangle", "figure-eight")
+"""Trajectories that repeat every ``trajectory.period_s``."""
+
+EIGHT = {"trajectory.size_m": 1.2, "trajectory.period_s": 8.0}
+"""Figure-eight 1.2 m (east) x 0.6 m (north), 8 s per lap."""
+
+RATE_GAINS_ONLY = ("sim.seed", "sim.k_rate_scale")
+"""What the H-infinity hovers take of a drawn plant: the rate gains (and the noise seed).
+The issue asks the design to stand rate gains 30 % off; it has no integral action, so
+the drawn mass and thrust errors would only show that (a height offset, or a take-off
+that never reaches its height)."""
+
+TAKEOFF_OFFSET_M = (0.02, 0.0)
+"""Where the take-off at heading 135 degrees starts, off the hover point's x/y [m]."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +93,8 @@ class Scenario:
     overrides : further configuration overrides (dotted paths), e.g. faults
     settle_s : tracking time skipped by the tracking metrics [s]
     expect_track : False if the thesis expects this flight not to reach tracking
+    perturbs : the keys of the drawn plant (:func:`~groundstation.evaluation.perturb.
+        perturbation`) this flight takes under ``--perturb``; None: all of them
     """
 
     name: str
@@ -67,6 +108,7 @@ class Scenario:
     overrides: Mapping[str, Any] = field(default_factory=dict)
     settle_s: float = 2.0
     expect_track: bool = True
+    perturbs: tuple[str, ...] | None = None
 
     @property
     def is_step(self) -> bool:
@@ -74,39 +116,91 @@ class Scenario:
         return self.trajectory.startswith("step-")
 
 
-def _suite() -> tuple[Scenario, ...]:
+def _thesis() -> list[Scenario]:
+    """Thesis Ch. 11 (and the fault flights built on it), raw references."""
     out = [Scenario(f"hover-{hz}hz", "hover-rates", f"Hover at (0, 0, -1) m, Vicon {hz} Hz",
-                    "Fig. 11.1-11.3", "hover", "lqr-cp", 20.0, vicon_hz=float(hz))
+                    "Fig. 11.1-11.3", "hover", "lqr-cp", 20.0, vicon_hz=float(hz),
+                    overrides=RAW)
            for hz in (1, 10, 100)]
     out += [Scenario(f"step-{axis}", "steps", f"{step} step on {axis}", "Fig. 11.4",
-                     f"step-{axis}", "lqr-cv", 12.0)
+                     f"step-{axis}", "lqr-cv", 12.0, overrides=RAW)
             for axis, step in (("x", "0.5 m north"), ("y", "0.5 m east"), ("z", "0.5 m up"))]
     out += [Scenario(f"square-{c}", "square", f"0.75 m square, 20 s per lap, 6 laps, {c}",
-                     "Fig. 11.5-11.6", "square", c, 120.0)
+                     "Fig. 11.5-11.6", "square", c, 120.0, overrides=RAW)
             for c in ("pid", "lqr-cp", "lqr-cv")]
     out += [Scenario(f"yz-rectangle-{c}", "yz-rectangle", f"y-z rectangle, 3 laps, {c}",
-                     "Fig. 11.7", "yz-rectangle", c, 60.0)
+                     "Fig. 11.7", "yz-rectangle", c, 60.0, overrides=RAW)
             for c in ("pid", "lqr-cp", "lqr-cv")]
     out.append(Scenario("low-hover", "low-hover", "Hover 2 cm above the floor", "Fig. 11.8",
-                        "low-hover", "lqr-cv", 15.0))
+                        "low-hover", "lqr-cv", 15.0, overrides=RAW))
     out.append(Scenario("square-vicon-outage", "outage", "Square with a 1 s Vicon outage",
                         "Ch. 7 (fault handling)", "square", "lqr-cv", 40.0,
-                        overrides={"sim.vicon.outages": [[OUTAGE_START_S, 1.0]]}))
+                        overrides={**RAW, "sim.vicon.outages": [[OUTAGE_START_S, 1.0]]}))
     out += [Scenario(f"{traj}-thrust-error", "thrust-error",
                      f"{traj.capitalize()} with 10 % less lift than the model",
                      "Ch. 5.2 (battery)", traj, "lqr-cv", dur,
-                     overrides={"sim.thrust_scale": 0.9})
+                     overrides={**RAW, "sim.thrust_scale": 0.9})
             for traj, dur in (("hover", 20.0), ("square", 40.0))]
     out += [Scenario("hinf-thesis-model", "hinf", "H-infinity designed on the thesis's model",
-                     "Ch. 10.3", "hover", "hinf-thesis", 20.0, expect_track=False),
+                     "Ch. 10.3", "hover", "hinf-thesis", 20.0, overrides=RAW,
+                     expect_track=False),
             Scenario("hinf-rate-loop-model", "hinf",
                      "H-infinity designed with the rate-loop lag", "Ch. 10.3", "hover",
-                     "hinf-rate-loop", 20.0)]
-    return tuple(out)
+                     "hinf-rate-loop", 20.0, overrides=RAW, perturbs=RATE_GAINS_ONLY)]
+    return out
+
+
+def _issue13() -> list[Scenario]:
+    """Issue 13: lqr-ff on shaped references, headings, and the comparison controllers."""
+    out = [Scenario(f"figure-eight-{c}", "figure-eight",
+                    f"Figure-eight 1.2 m x 0.6 m, 8 s per lap, 4 laps, {c}", "issue 13",
+                    "figure-eight", c, 32.0, overrides={**SHAPED, **EIGHT}, settle_s=8.0)
+           for c in ("lqr-ff", "pid", "lqr-cp", "lqr-cv")]
+    out.append(Scenario("yaw-turn", "yaw-turn", "360 degree yaw turn in 20 s holding position",
+                        "issue 13", "yaw-turn", "lqr-ff", 20.0,
+                        overrides={**SHAPED, "trajectory.period_s": 20.0,
+                                   "trajectory.yaw_turn_deg": 360.0}))
+    for heading in (0, 135):
+        tag = "" if heading == 0 else f"-h{heading}"
+        out.append(Scenario(f"square-shaped{tag}-lqr-ff", "square-shaped",
+                            f"Shaped 0.75 m square at heading {heading} deg, 2 laps, lqr-ff",
+                            "issue 13", "square", "lqr-ff", 40.0,
+                            overrides={**SHAPED, "trajectory.yaw_deg": float(heading),
+                                       "sim.initial_yaw_deg": float(heading)}))
+    out += [Scenario(f"square-shaped-{c}", "square-shaped",
+                     f"Shaped 0.75 m square at heading 0 deg, 2 laps, {c}", "issue 13",
+                     "square", c, 40.0, overrides={**SHAPED, "trajectory.yaw_deg": 0.0})
+            for c in ("pid", "lqr-cp", "lqr-cv")]
+    out.append(Scenario("takeoff-h135", "headings",
+                        "Take-off 2 cm off the hover point at heading 135 deg, hover",
+                        "issue 13", "hover", "lqr-ff", 15.0,
+                        overrides={**SHAPED, "sim.initial_yaw_deg": 135.0,
+                                   "sim.initial_position": [*TAKEOFF_OFFSET_M, 0.0]}))
+    out += [Scenario(f"hover-h{h}", "headings", f"Hover at heading {h} deg (free heading)",
+                     "issue 13", "hover", "lqr-ff", 15.0,
+                     overrides={**SHAPED, "sim.initial_yaw_deg": float(h)})
+            for h in (90, 180, 270)]
+    out += [Scenario(f"hinf-rate-gains-{tag}", "hinf",
+                     f"H-infinity (rate-loop design), rate gains {pct} % {tag}", "issue 13",
+                     "hover", "hinf-rate-loop", 20.0,
+                     overrides={**RAW, "sim.k_rate_scale": [scale] * 3},
+                     perturbs=RATE_GAINS_ONLY)
+            for tag, pct, scale in (("low", 30, 0.7), ("high", 30, 1.3))]
+    return out
+
+
+def _suite() -> tuple[Scenario, ...]:
+    return (*_thesis(), *_issue13())
 
 
 SUITE: tuple[Scenario, ...] = _suite()
 """The whole suite, in report order."""
+
+THESIS: tuple[str, ...] = tuple(s.name for s in _thesis())
+"""The names of the Ch. 11 flights (and the fault flights built on them)."""
+
+ISSUE13: tuple[str, ...] = tuple(s.name for s in _issue13())
+"""The names of issue 13's flights."""
 
 
 def select(names: Sequence[str] | None = None) -> tuple[Scenario, ...]:
@@ -164,3 +258,18 @@ def step_of(trajectory: Trajectory) -> tuple[float, FloatArray, FloatArray]:
     t_step = trajectory.duration
     return (t_step, trajectory.sample(0.0).position,
             trajectory.sample(t_step + 1.0).position)
+
+
+def lap_period(scenario: Scenario, config: GroundStationConfig) -> float | None:
+    """Lap time [s] of a periodic scenario's reference (``config`` is the scenario's), else
+    None."""
+    return config.trajectory.period_s if scenario.trajectory in PERIODIC else None
+
+
+def corners_of(scenario: Scenario, config: GroundStationConfig) -> FloatArray | None:
+    """(4, 3) NED corners [m] of a square scenario (``config`` is the scenario's), else None."""
+    if scenario.trajectory != "square":
+        return None
+    c, h = config.trajectory.center, 0.5 * config.trajectory.size_m
+    return np.array([[c[0] + dx, c[1] + dy, c[2]] for dx, dy in
+                     ((+h, -h), (+h, +h), (-h, +h), (-h, -h))])

@@ -4,39 +4,46 @@
 scenario (in-process with ``fast``, else in real time over pty and UDP),
 computes its metrics, and writes ``report.md`` (the metrics table and the
 figures), ``metrics.json`` and the PNGs into ``out_dir``.
+
+With ``perturb`` seeds (``gs eval --perturb 1-5``) every scenario flies once on each
+seed's plant (:func:`~groundstation.evaluation.perturb.perturbation`); a scenario's
+metrics are then the worst case over the seeds
+(:func:`~groundstation.evaluation.scoring.worst_case`), each naming its seed, and
+its record (for the figures) is that of its worst flight: one that did not complete,
+else the one with the largest RMS error. Scenario overrides take precedence over the
+drawn plant (the thrust-error flights keep their 10 %, the H-infinity rate-gain
+flights their gains), and a scenario may take only part of it (``Scenario.perturbs``:
+the H-infinity hovers take the rate gains).
 """
 
 from __future__ import annotations
 
-import datetime as dt
+import math
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from groundstation import __version__
-from groundstation.config import GroundStationConfig
+from groundstation.config import GroundStationConfig, apply_overrides
 from groundstation.control.simulate import SimResult
 from groundstation.evaluation.figures import all_figures
-from groundstation.evaluation.record import TIMING_FAST, TIMING_REAL_TIME, FlightRecord
-from groundstation.evaluation.report import (
-    DEFINITIONS,
-    metrics_table,
-    states_line,
-    transitions_json,
-    write_json,
-)
+from groundstation.evaluation.perturb import perturbation
+from groundstation.evaluation.record import FlightRecord
+from groundstation.evaluation.report import transitions_json, write_json
 from groundstation.evaluation.runner import run_in_process, run_real_time, simulate_model
 from groundstation.evaluation.scenarios import (
-    STEP_TIME_S,
     Scenario,
+    corners_of,
+    lap_period,
     scenario_config,
     scenario_trajectory,
     select,
     step_of,
 )
-from groundstation.evaluation.scoring import StepSpec, flight_metrics
+from groundstation.evaluation.scoring import StepSpec, flight_metrics, worst_case
+from groundstation.evaluation.summary import eval_json, eval_markdown
+from groundstation.evaluation.targets import TargetResult, check_targets
 
 Progress = Callable[[str], None]
 
@@ -52,23 +59,52 @@ CAPTIONS: dict[str, str] = {
     "fig11_8_low_hover.png": "Hover at 2 cm (thesis Fig. 11.8).",
     "vicon_outage.png": "1 s Vicon outage during the square.",
     "thrust_error.png": "10 % thrust error during hover and the square.",
-    "hinf.png": "H-infinity designed without and with the rate-loop model.",
+    "hinf.png": "H-infinity designed without and with the rate-loop model (and the latter "
+                "with rate gains 30 % low and high): tilt, height and heading.",
+    "figure_eight.png": "Figure-eight 1.2 m x 0.6 m, 8 s per lap, top view: lqr-ff against "
+                        "the reference, and the PID and the thesis's LQRs.",
+    "yaw_turn.png": "360 degree yaw turn in 20 s: heading against the reference, heading "
+                    "error, and horizontal position error.",
+    "square_headings.png": "Shaped square at heading 0 and 135 degrees (lqr-ff): top views "
+                           "with the nose direction, and the errors off the path and in time.",
+    "takeoff_h135.png": "Take-off 2 cm off the hover point at heading 135 degrees: top view "
+                        "and heading.",
 }
 
 
 @dataclass(frozen=True)
+class SeedRun:
+    """One flight of a scenario on one perturbed plant (its record is not kept)."""
+
+    metrics: dict[str, Any]
+    transitions: list[list[Any]]
+    wall_s: float
+
+
+@dataclass(frozen=True)
 class ScenarioOutcome:
-    """One flown scenario: its record, metrics and wall time [s]."""
+    """One flown scenario: its record, metrics and wall time [s].
+
+    Nominal (one flight): ``runs`` empty, ``metrics`` that flight's. Perturbed:
+    ``runs`` by seed, ``metrics`` the worst case over them, ``seed_of`` the seed of
+    each figure, ``failed`` the seeds whose flight did not complete, ``record`` the
+    flight of seed ``record_seed`` (the worst), ``wall_s`` the total.
+    """
 
     scenario: Scenario
     record: FlightRecord
     metrics: dict[str, Any]
     wall_s: float
+    runs: dict[int, SeedRun] = field(default_factory=dict)
+    seed_of: dict[str, int] = field(default_factory=dict)
+    failed: tuple[int, ...] = ()
+    record_seed: int | None = None
 
 
 @dataclass(frozen=True)
 class EvalReport:
-    """What :func:`run_eval` flew and wrote."""
+    """What :func:`run_eval` flew and wrote (``plants``: the drawn plant by seed, empty
+    for a nominal run)."""
 
     outcomes: dict[str, ScenarioOutcome]
     fast: bool
@@ -77,109 +113,121 @@ class EvalReport:
     metrics_json: Path
     figures: list[Path]
     wall_s: float
+    plants: dict[int, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def metrics(self) -> dict[str, dict[str, Any]]:
-        """Metrics by scenario name."""
+        """Metrics by scenario name (the worst case over the seeds when perturbed)."""
         return {name: o.metrics for name, o in self.outcomes.items()}
 
+    @property
+    def worst_seeds(self) -> dict[str, dict[str, int]]:
+        """Scenario name -> metric -> the seed that gave the worst figure (empty: nominal)."""
+        return {name: o.seed_of for name, o in self.outcomes.items()}
 
-def _step_spec(scenario: Scenario, config: GroundStationConfig) -> StepSpec | None:
+    def targets(self) -> list[TargetResult]:
+        """Issue 13's targets against :attr:`metrics` (see :mod:`.targets`)."""
+        return check_targets(self.metrics, self.worst_seeds)
+
+
+def _step_spec(scenario: Scenario, cfg: GroundStationConfig) -> StepSpec | None:
     if not scenario.is_step:
         return None
     axis = "xyz".index(scenario.trajectory[-1])
-    cfg = scenario_config(scenario, config)
     t_step, initial, final = step_of(scenario_trajectory(scenario, cfg))
     return axis, t_step, float(initial[axis]), float(final[axis])
 
 
 def fly_scenario(scenario: Scenario, config: GroundStationConfig, *, fast: bool,
                  workdir: Path) -> ScenarioOutcome:
-    """Fly one scenario and score it."""
+    """Fly one scenario on the plant of ``config`` and score it."""
     start = time.perf_counter()
     record = (run_in_process(scenario, config) if fast
               else run_real_time(scenario, config, workdir))
     wall = time.perf_counter() - start
+    cfg = scenario_config(scenario, config)
     metrics = flight_metrics(record, settle_s=scenario.settle_s, duration_s=scenario.duration_s,
-                             step=_step_spec(scenario, config))
+                             step=_step_spec(scenario, cfg), period_s=lap_period(scenario, cfg),
+                             corners=corners_of(scenario, cfg))
     return ScenarioOutcome(scenario, record, metrics, wall)
+
+
+def _worse(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    """Flight ``a`` is worse than ``b``: it failed where ``b`` did not, or erred more."""
+    if a["completed"] != b["completed"]:
+        return not a["completed"]
+    rms_a, rms_b = a.get("rms_m", math.nan), b.get("rms_m", math.nan)
+    return bool(math.isfinite(rms_a) and not (math.isfinite(rms_b) and rms_b >= rms_a))
+
+
+def plant_for(scenario: Scenario, plant: Mapping[str, Any]) -> dict[str, Any]:
+    """The overrides of a drawn ``plant`` that ``scenario`` takes (``Scenario.perturbs``)."""
+    keys = scenario.perturbs
+    return {k: v for k, v in plant.items() if keys is None or k in keys}
+
+
+def fly_perturbed(scenario: Scenario, config: GroundStationConfig,
+                  plants: Mapping[int, Mapping[str, Any]], *, fast: bool,
+                  workdir: Path) -> ScenarioOutcome:
+    """Fly ``scenario`` on every seed's plant (``plants``: seed -> overrides, see
+    :func:`plant_for`) and reduce the flights to the worst case; real-time flights go
+    to ``workdir/seed-<s>``."""
+    runs: dict[int, SeedRun] = {}
+    kept: tuple[int, ScenarioOutcome] | None = None
+    for seed, plant in plants.items():
+        base = apply_overrides(config, plant_for(scenario, plant))
+        o = fly_scenario(scenario, base, fast=fast, workdir=workdir / f"seed-{seed}")
+        runs[seed] = SeedRun(o.metrics, transitions_json(o.record.transitions,
+                                                         float(o.record.t[0])), o.wall_s)
+        if kept is None or _worse(o.metrics, kept[1].metrics):
+            kept = (seed, o)
+    assert kept is not None, "fly_perturbed needs at least one seed"
+    worst = worst_case({s: r.metrics for s, r in runs.items()})
+    record = replace(kept[1].record, meta={**kept[1].record.meta, "seed": kept[0]})
+    return ScenarioOutcome(scenario, record, worst.metrics,
+                           sum(r.wall_s for r in runs.values()), runs, worst.seed_of,
+                           worst.failed, kept[0])
 
 
 def run_eval(config: GroundStationConfig, fast: bool = True, out_dir: str | Path = "eval", *,
              scenarios: Sequence[str] | None = None, figures: bool = True,
-             progress: Progress | None = None) -> EvalReport:
+             progress: Progress | None = None,
+             perturb: Sequence[int] | None = None) -> EvalReport:
     """Fly the suite (``gs eval``) and write ``report.md``, ``metrics.json`` and the figures.
 
     config : a virtual-lab configuration (``config/sim.yaml``); fast : in-process on
     the simulated clock, else in real time (flight logs under ``out_dir/flights``);
     scenarios : names to fly (default all); figures : render the PNGs (needs
-    matplotlib); progress : receives one line per flight.
-    ConfigError for a configuration without ``sim`` or an unknown scenario name.
+    matplotlib); progress : receives one line per flight; perturb : seeds of the
+    perturbed plants to fly every scenario on (None or empty: the nominal plant once).
+    ConfigError for a configuration without ``sim``, an unknown scenario name or a
+    negative seed.
     """
     chosen = select(scenarios)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     say = progress if progress is not None else (lambda _line: None)
+    plants = {seed: perturbation(seed, config.vehicle.rate_loop_tau_s)
+              for seed in (perturb or ())}
     start = time.perf_counter()
     outcomes: dict[str, ScenarioOutcome] = {}
     for k, scenario in enumerate(chosen, start=1):
-        o = fly_scenario(scenario, config, fast=fast, workdir=out / "flights")
+        if plants:
+            o = fly_perturbed(scenario, config, plants, fast=fast, workdir=out / "flights")
+        else:
+            o = fly_scenario(scenario, config, fast=fast, workdir=out / "flights")
         outcomes[scenario.name] = o
+        seed = f" (worst: seed {o.seed_of['rms_m']})" if "rms_m" in o.seed_of else ""
+        failed = f", failed on seed(s) {', '.join(map(str, o.failed))}" if o.failed else ""
         say(f"[{k}/{len(chosen)}] {scenario.name}: {o.metrics['final_state']}, RMS "
-            f"{100 * o.metrics['rms_m']:.2f} cm, {o.wall_s:.1f} s")
+            f"{100 * o.metrics['rms_m']:.2f} cm{seed}{failed}, {o.wall_s:.1f} s")
     models: dict[str, SimResult] = {s.name: simulate_model(s, config)
                                     for s in chosen if s.is_step}
     pngs = all_figures({n: o.record for n, o in outcomes.items()}, models, out,
                        config.trajectory.period_s) if figures else []
     wall = time.perf_counter() - start
-    mj = write_json(out / "metrics.json", _json(outcomes, config, fast, wall))
-    md = out / "report.md"
-    md.write_text(_markdown(outcomes, config, fast, wall, pngs), encoding="utf-8")
-    return EvalReport(outcomes, fast, out, md, mj, pngs, wall)
-
-
-def _json(outcomes: dict[str, ScenarioOutcome], config: GroundStationConfig, fast: bool,
-          wall: float) -> dict[str, Any]:
-    scenarios = {}
-    for name, o in outcomes.items():
-        s = o.scenario
-        scenarios[name] = {
-            "title": s.title, "thesis": s.thesis, "controller": s.controller,
-            "trajectory": s.trajectory, "vicon_hz": s.vicon_hz, "duration_s": s.duration_s,
-            "overrides": dict(s.overrides), "wall_s": o.wall_s, "metrics": o.metrics,
-            "transitions": transitions_json(o.record.transitions, float(o.record.t[0])),
-        }
-    return {"format": "groundstation evaluation", "version": __version__,
-            "mode": "fast" if fast else "real-time",
-            "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-            "seed": config.sim.seed if config.sim is not None else None,
-            "timing": TIMING_FAST if fast else TIMING_REAL_TIME, "wall_s": wall,
-            "step_time_s": STEP_TIME_S, "scenarios": scenarios}
-
-
-def _markdown(outcomes: dict[str, ScenarioOutcome], config: GroundStationConfig, fast: bool,
-              wall: float, pngs: list[Path]) -> str:
-    rows = [([f"`{n}`", o.scenario.controller, f"{o.scenario.vicon_hz:g}",
-              o.metrics["final_state"] + ("" if o.metrics["completed"] else " (not completed)")],
-             o.metrics) for n, o in outcomes.items()]
-    table = metrics_table(["scenario", "controller", "Vicon [Hz]", "end"], rows,
-                          real_time=not fast)
-    seed = config.sim.seed if config.sim is not None else "-"
-    lines = [
-        "# Evaluation report", "",
-        f"- mode: **{'fast (in-process, simulated clock)' if fast else 'real time (pty, UDP)'}**",
-        f"- groundstation {__version__}, virtual lab seed {seed}, "
-        f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC",
-        f"- wall time: {wall:.1f} s for {len(outcomes)} flights",
-        f"- timing: {TIMING_FAST if fast else TIMING_REAL_TIME}",
-        f"- steps come {STEP_TIME_S:g} s after tracking starts; Vicon 10 Hz unless stated "
-        "(thesis Ch. 11.1); hover uses the constant-position LQR as in the thesis",
-        "", "## Metrics", "", table, DEFINITIONS, "## Flights", "",
-    ]
-    lines += [f"- `{n}`: {o.scenario.title} ({o.scenario.thesis}); states "
-              f"{states_line(o.record.transitions)}" for n, o in outcomes.items()]
-    if pngs:
-        lines += ["", "## Figures", ""]
-        for p in pngs:
-            lines += [f"### {CAPTIONS.get(p.name, p.stem)}", "", f"![{p.stem}]({p.name})", ""]
-    return "\n".join(lines) + "\n"
+    report = EvalReport(outcomes, fast, out, out / "report.md", out / "metrics.json", pngs, wall,
+                        plants)
+    write_json(report.metrics_json, eval_json(report, config))
+    report.report_md.write_text(eval_markdown(report, config, CAPTIONS), encoding="utf-8")
+    return report

@@ -8,11 +8,17 @@ evaluation build identical flights.
 
 from __future__ import annotations
 
+import math
+
 from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller
+from groundstation.control.feasibility import FlightLimits, LimitNames, Volume, check_feasibility
 from groundstation.control.lqr import LqrController
 from groundstation.control.lqr_ff import FeedforwardLqr
 from groundstation.control.pid import PidController
+from groundstation.control.shaping import shape_for_flight
+from groundstation.control.trajectories import trajectory_from_config
+from groundstation.control.trajectory import Trajectory
 from groundstation.errors import ConfigError
 from groundstation.loop.inputs import quadrotor_params
 
@@ -48,5 +54,57 @@ def controller_from_config(config: GroundStationConfig) -> Controller:
         from groundstation.control.hinf import HinfController, default_gain_path, load_hinf_gain
 
         path = c.hinf.gain_file or default_gain_path(c.hinf.include_rate_loop)
-        return HinfController(load_hinf_gain(path), params=params)
+        return HinfController(load_hinf_gain(path), params=params, dt=dt,
+                              integral_limit=c.hinf.integral_limit)
     raise ConfigError(f"controller.type: {c.type!r}: unknown controller")
+
+
+def flight_limits_from_config(config: GroundStationConfig) -> FlightLimits:
+    """What a reference may ask of the vehicle: the vehicle model's lift and rate range,
+    ``safety.trajectory_tilt_deg``, ``safety.max_speed_m_s`` and
+    ``safety.max_yaw_rate_deg_s``; refusals name those keys."""
+    s = config.safety
+    params = quadrotor_params(config)
+    safety_yaw = math.radians(s.max_yaw_rate_deg_s)
+    vehicle_yaw = abs(params.k_rate[2]) * 2047
+    names = LimitNames(
+        speed="safety.max_speed_m_s", tilt="safety.trajectory_tilt_deg",
+        tilt_rate="the roll/pitch rate limit (vehicle.k_rate x 2047)",
+        yaw_rate="safety.max_yaw_rate_deg_s" if safety_yaw <= vehicle_yaw
+        else "the yaw rate limit (vehicle.k_rate x 2047)",
+        lift="vehicle.thrust_poly", position_jump="the position-jump limit",
+        velocity_jump="the velocity-jump limit")
+    return FlightLimits.from_params(params, max_tilt_deg=s.trajectory_tilt_deg,
+                                    max_speed_m_s=s.max_speed_m_s,
+                                    max_yaw_rate_rad_s=safety_yaw, names=names)
+
+
+def volume_from_config(config: GroundStationConfig) -> Volume:
+    """``safety.volume_x/y/z`` less ``safety.volume_margin_m`` (the floor excepted)."""
+    s = config.safety
+    return Volume(x=s.volume_x, y=s.volume_y, z=s.volume_z, margin_m=s.volume_margin_m,
+                  name="safety.volume")
+
+
+def trajectory_for_flight(config: GroundStationConfig, trajectory: Trajectory | None = None,
+                          duration_s: float | None = None) -> tuple[Trajectory, float]:
+    """The trajectory to fly and how long to fly it [s], checked before flight.
+
+    Builds ``config.trajectory`` unless ``trajectory`` is given; the default duration
+    is one lap of a periodic trajectory, else the longer of the trajectory and
+    ``trajectory.period_s``. With ``trajectory.shaping: min-jerk`` it is made
+    flyable (:func:`~groundstation.control.shaping.shape_for_flight`; an eased
+    start and end lengthen the flight by the ramp). Then every sampled point is
+    checked against the limits and the volume (:func:`flight_limits_from_config`,
+    :func:`volume_from_config`). Raises TrajectoryError (a waypoint file that cannot
+    be read, one line per broken limit) before anything is connected.
+    """
+    traj = trajectory if trajectory is not None else trajectory_from_config(config.trajectory)
+    if duration_s is None:
+        duration_s = traj.duration if traj.periodic and traj.duration > 0.0 \
+            else max(traj.duration, config.trajectory.period_s)
+    limits = flight_limits_from_config(config)
+    if config.trajectory.shaping == "min-jerk":
+        traj, duration_s = shape_for_flight(traj, duration_s, limits.max_accel_m_s2)
+    check_feasibility(traj, limits, volume=volume_from_config(config), horizon_s=duration_s)
+    return traj, duration_s

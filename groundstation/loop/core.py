@@ -34,13 +34,12 @@ import numpy as np
 from groundstation.asctec.channels import ChannelHandover
 from groundstation.asctec.messages import ALL_CHANNELS_MASK, Channel, CommandMsg
 from groundstation.config import GroundStationConfig
-from groundstation.control.base import Controller
+from groundstation.control.base import Controller, heading_of
 from groundstation.control.sticks import StickParams, to_sticks
-from groundstation.control.trajectories import trajectory_from_config
 from groundstation.control.trajectory import Trajectory
 from groundstation.estimation.ekf import Ekf
 from groundstation.estimation.records import EkfParams, InitReport
-from groundstation.loop.assemble import controller_from_config
+from groundstation.loop.assemble import controller_from_config, trajectory_for_flight
 from groundstation.loop.inputs import InputHealth, VehicleStatus, quadrotor_params
 from groundstation.loop.mission import Mission
 from groundstation.loop.supervisor import Observation, State, Supervisor, SupervisorLimits
@@ -61,6 +60,8 @@ class TickResult:
     reference : the reference tracked this tick
     estimate : the estimate (None until the estimator is initialised)
     sticks : the controller's sticks before handover (None when not commanding)
+    preview : the look-ahead reference the controller stepped with this tick (None when
+        it did not step or asked for none)
     """
 
     command: CommandMsg
@@ -69,6 +70,7 @@ class TickResult:
     reference: Reference
     estimate: StateEstimate | None
     sticks: Sticks | None
+    preview: Reference | None = None
 
 
 def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
@@ -79,7 +81,7 @@ def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
         max_tilt_rad=math.radians(s.max_tilt_deg),
         handback_tilt_rad=math.radians(s.handback_tilt_deg), vicon_loss_hold_s=s.vicon_loss_hold_s,
         vicon_loss_land_s=s.vicon_loss_land_s, link_loss_s=s.link_loss_s,
-        preflight_timeout_s=s.preflight_timeout_s,
+        preflight_timeout_s=s.preflight_timeout_s, takeoff_timeout_s=s.takeoff_timeout_s,
         min_data_rate_hz=0.8 * 1000.0 / config.serial.data_period_ms,
         min_vicon_rate_hz=config.vicon.min_rate_hz, on_signal=s.on_signal,
     )
@@ -91,8 +93,9 @@ class FlightCore:
     config : the validated configuration
     controller, trajectory, estimator : replace the ones the configuration names
         (tests and the evaluation inject their own)
-    duration_s : trajectory time flown before landing (default: one trajectory
-        period, or 20 s)
+    duration_s : trajectory time flown before landing (default: see
+        :func:`~groundstation.loop.assemble.trajectory_for_flight`, which also shapes
+        and checks the trajectory: TrajectoryError if it cannot be flown)
     """
 
     def __init__(self, config: GroundStationConfig, *, controller: Controller | None = None,
@@ -102,12 +105,14 @@ class FlightCore:
         quad = quadrotor_params(config)
         self.ekf = estimator or Ekf(EkfParams.from_config(config.vehicle, config.estimator))
         self.controller = controller or controller_from_config(config)
-        self.trajectory = trajectory or trajectory_from_config(config.trajectory)
-        duration = duration_s if duration_s is not None else config.trajectory.period_s
-        self.mission = Mission(self.trajectory.sample, duration,
+        # built from the configuration unless given, shaped, and refused (TrajectoryError)
+        # unless it is feasible and inside the volume
+        self.trajectory, duration = trajectory_for_flight(config, trajectory, duration_s)
+        self.mission = Mission(self.trajectory, duration,
                                climb_speed=config.safety.takeoff_speed_m_s,
                                land_speed=config.safety.land_speed_m_s,
-                               spool_s=config.serial.handover_blend_s)
+                               spool_s=config.serial.handover_blend_s,
+                               max_yaw_rate=math.radians(config.safety.max_yaw_rate_deg_s))
         self.supervisor = Supervisor(limits_from_config(config))
         self.handover = ChannelHandover(blend_time=config.serial.handover_blend_s)
         self._auto = tuple(config.channels.auto)
@@ -115,6 +120,7 @@ class FlightCore:
         self._stick_params = StickParams.from_quadrotor(quad)
         self._sticks: Sticks | None = None  # the controller's sticks of the last COMMAND
         self._command = CommandMsg.release()
+        self._preview: Reference | None = None
         self._weight = quad.mass * quad.g  # [N]
         self._lift_fraction = 1.0  # last commanded lift / weight, for the landing check
         self._command_period = 1.0 / config.serial.command_rate_hz
@@ -154,7 +160,7 @@ class FlightCore:
         state = self.supervisor.update(self._observe(t, vehicle, health, stop_requests))
         position = self._position()
         if state is not old:
-            self._enter(state, t, position)
+            self._enter(state, old, t, position)
         reference = self.mission.reference(t)
         commanding = self.supervisor.commanding
         due = t >= self._next_command or commanding != self._was_commanding
@@ -163,6 +169,7 @@ class FlightCore:
             if self._next_command <= t:
                 self._next_command = t + self._command_period
         self._was_commanding = commanding
+        self._preview = None
         if not (commanding and self._estimate is not None):
             self._sticks = None
             self._command = CommandMsg.release()
@@ -172,7 +179,8 @@ class FlightCore:
             self._command = self.handover.compose(t, self._sticks, vehicle.pilot)
             if state is not State.DISARM:
                 self._report_sent(self._command, t)
-        return TickResult(self._command, due, state, reference, self._estimate, self._sticks)
+        return TickResult(self._command, due, state, reference, self._estimate, self._sticks,
+                          self._preview)
 
     # ------------------------------------------------------------------ steps
     def estimate_step(self, imu: ImuSample | None, poses: Sequence[Pose]) -> StateEstimate | None:
@@ -249,9 +257,12 @@ class FlightCore:
             return self._last_pose.position
         return np.zeros(3)
 
-    def _enter(self, state: State, t: float, position: np.ndarray) -> None:
-        self.mission.enter(state, t, position)
-        if state is State.TAKEOFF:
+    def _enter(self, state: State, old: State, t: float, position: np.ndarray) -> None:
+        yaw = heading_of(self._estimate.quaternion) if self._estimate is not None else 0.0
+        self.mission.enter(state, t, position, yaw)
+        if state is State.TAKEOFF and old is State.PREFLIGHT:
+            # a fresh start on the floor; a take-off resumed after a HOLD keeps the
+            # controller's integrators and input history (the vehicle is in the air)
             self.controller.reset()
             self.handover.set_auto(self._auto)
         elif not self.supervisor.commanding:
@@ -263,6 +274,7 @@ class FlightCore:
             return Sticks(0, 0, 0, 0)  # motors to idle on the floor before handing back
         lead = self.controller.lead_s
         preview = self.mission.preview(t, lead) if lead > 0.0 else None
+        self._preview = preview
         output = self.controller.step(t, est, reference, preview)
         self._lift_fraction = 1.0 - output.f_z / self._weight  # f_z = F_lift + m g, lift < 0
         sticks, _flags = to_sticks(output, self._stick_params)

@@ -1,8 +1,9 @@
 """``gs fly``: run one flight (optionally against the virtual lab) and report it.
 
 Returns the process exit code: 0 after a normal landing and handover or a
-requested stop, 1 otherwise. Resource errors (port, socket, log directory) are
-reported in one line, never as a traceback.
+requested stop, 1 otherwise, 2 for a trajectory that cannot be flown (refused
+before anything is connected). Resource errors (port, socket, log directory)
+are reported in one line, never as a traceback.
 """
 
 from __future__ import annotations
@@ -13,7 +14,8 @@ from contextlib import ExitStack
 from pathlib import Path
 
 from groundstation.config import GroundStationConfig, apply_overrides
-from groundstation.errors import GroundStationError
+from groundstation.errors import GroundStationError, TrajectoryError
+from groundstation.loop.assemble import trajectory_for_flight
 from groundstation.loop.daemon import FlightDaemon, FlightSummary
 
 Echo = Callable[[str], None]
@@ -41,6 +43,11 @@ def summary_lines(summary: FlightSummary) -> list[str]:
 def fly_command(config: GroundStationConfig, *, duration_s: float | None = None,
                 demo: bool = False, echo: Echo = print) -> int:
     """Fly once; with ``demo`` start the virtual lab first and plot the result."""
+    try:
+        trajectory_for_flight(config, duration_s=duration_s)  # the flight core builds it again
+    except TrajectoryError as exc:
+        echo(f"error: {exc}")
+        return 2
     try:
         with ExitStack() as stack:
             truth_file: Path | None = None

@@ -1,109 +1,88 @@
 """The reference the controller tracks in each supervisor phase.
 
-Pure and clock-free: the flight core passes the time and the supervisor state.
+Pure and clock-free: the flight core passes the time, the supervisor state and
+the vehicle's position and heading when a phase begins. Every reference carries
+exact position, velocity, acceleration, jerk, heading and heading rate; every
+move is a rest-to-rest minimum-jerk segment
+(:class:`~groundstation.control.minjerk.MinJerkSegment`) whose duration follows
+from a speed and an acceleration limit, so the acceleration never steps.
 
 * TAKEOFF: stay on the ground for ``spool_s`` (the thrust channel is still
   blending from the pilot's stick, so a climbing reference would only build up
   error), climb vertically from the ground position to the trajectory's start
   height at ``climb_speed``, then move horizontally to the trajectory's start
-  point at the same speed. Take-off is done when the path is complete and the
-  vehicle is within ``tolerance`` of the start point.
+  point at the same speed (a mean speed: each move lasts as long as it would at
+  that constant speed, or longer if the acceleration limit asks for it; the peak
+  is 15/8 of it, so a landing takes as long as ``distance / land_speed``).
+  From the top of the climb the heading turns the shortest way to the
+  trajectory's start heading (an absolute heading) within ``max_yaw_rate``
+  (a peak rate); a free-heading trajectory keeps the heading at take-off,
+  which is added to its yaw from then on. Take-off is done when both moves are
+  complete and the vehicle is within ``tolerance`` of the start point.
+  Re-entered after a HOLD, it goes on from where the vehicle is, without spool.
 * TRACK: the trajectory, on its own time axis, paused while in HOLD.
-* HOLD: the position where the hold began, zero velocity.
-* LAND: descend from where landing began at ``land_speed`` (same profile) to just below the
-  ground height (so the vehicle really touches down), then stay there.
+* HOLD: the position where the hold began, the heading the vehicle had then.
+* LAND: descend from where landing began at ``land_speed`` (same profile) to just
+  below the ground height (so the vehicle really touches down), then stay there;
+  the heading the vehicle had when the landing began.
 * DISARM and after: where the vehicle was when the phase began (it is on the
-  floor; before take-off, the origin).
+  floor; before take-off, the origin), with its heading then.
 
-All positions NED [m], velocities [m/s].
+All positions NED [m], velocities [m/s], headings [rad] (continuous: they may pass
++-pi; the controllers wrap the heading error).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
+from groundstation.control.minjerk import MinJerkSegment, min_jerk_duration
+from groundstation.control.trajectory import Trajectory
 from groundstation.loop.supervisor import State
 from groundstation.types import FloatArray, Reference
 
-TrajectoryFn = Callable[[float], Reference]
 
-
-@dataclass(frozen=True, slots=True)
-class _Segment:
-    """Straight line from ``start`` to ``end`` beginning at ``t0``, trapezoidal speed.
-
-    Accelerates at ``accel`` to ``speed``, cruises, and decelerates to rest, so the
-    reference never asks for an infinite acceleration (a velocity step makes a
-    controller that feeds the reference velocity forward overshoot, Ch. 11.3).
-    Short segments never reach ``speed`` (triangular profile).
-    """
-
-    t0: float
-    start: FloatArray
-    end: FloatArray
-    speed: float
-    accel: float = 0.5
-
-    @property
-    def length(self) -> float:
-        return float(np.linalg.norm(self.end - self.start))
-
-    @property
-    def _peak(self) -> float:
-        return min(self.speed, math.sqrt(self.accel * self.length))
-
-    @property
-    def duration(self) -> float:
-        if self.length == 0.0:
-            return 0.0
-        v = self._peak
-        return 2.0 * v / self.accel + (self.length - v * v / self.accel) / v
-
-    def at(self, t: float) -> tuple[FloatArray, FloatArray]:
-        """Position and velocity at time t (clamped to the segment)."""
-        length = self.length
-        if length == 0.0:
-            return self.end.copy(), np.zeros(3)
-        v, a, T = self._peak, self.accel, self.duration
-        tau = min(max(t - self.t0, 0.0), T)
-        t_acc = v / a
-        if tau < t_acc:
-            s, ds = 0.5 * a * tau * tau, a * tau
-        elif tau > T - t_acc:
-            rest = T - tau
-            s, ds = length - 0.5 * a * rest * rest, a * rest
-        else:
-            s, ds = 0.5 * v * t_acc + v * (tau - t_acc), v
-        direction = (self.end - self.start) / length
-        return self.start + s * direction, direction * ds
+def wrap_angle(angle: float) -> float:
+    """``angle`` [rad] wrapped to ``[-pi, pi)``."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 class Mission:
     """Reference generator across take-off, tracking, hold and landing.
 
-    trajectory : reference of the trajectory at its own time [s] since its start
-    duration_s : how long the trajectory is flown before landing
-    climb_speed, land_speed : [m/s]
+    trajectory : the (shaped) trajectory, sampled at its own time [s] since its start
+    duration_s : how long the trajectory is flown before landing [s]
+    climb_speed, land_speed : [m/s]; accel : acceleration limit of the take-off and
+        landing moves [m/s^2]; max_yaw_rate [rad/s], yaw_accel [rad/s^2] : of the
+        take-off's heading turn
+    tolerance : distance [m] to the start point within which take-off is done
+    touchdown_depth : how far below the ground the landing aims [m]
+    spool_s : time on the ground at the start of take-off [s]
     """
 
-    def __init__(self, trajectory: TrajectoryFn, duration_s: float, climb_speed: float = 0.5,
+    def __init__(self, trajectory: Trajectory, duration_s: float, climb_speed: float = 0.5,
                  land_speed: float = 0.3, tolerance: float = 0.1,
-                 touchdown_depth: float = 0.1, spool_s: float = 0.0) -> None:
+                 touchdown_depth: float = 0.1, spool_s: float = 0.0, *, accel: float = 0.5,
+                 max_yaw_rate: float = math.radians(90.0), yaw_accel: float = 1.0) -> None:
         self._trajectory = trajectory
         self.duration_s = duration_s
         self._climb = climb_speed
         self._land = land_speed
+        self._accel = accel
+        self._yaw_rate = max_yaw_rate
+        self._yaw_accel = yaw_accel
         self._tol = tolerance
         self._depth = touchdown_depth
         self._spool = spool_s
         self._state = State.PREFLIGHT
         self._ground = np.zeros(3)
-        self._path: list[_Segment] = []
-        self._hold_point = np.zeros(3)
+        self._path: list[MinJerkSegment] = []
+        self._turn: MinJerkSegment | None = None
+        self._heading = 0.0  # held in HOLD, LAND and on the ground [rad]
+        self._offset = 0.0  # added to the trajectory's yaw [rad]
         self._rest_point = np.zeros(3)
         self._track_clock = 0.0
         self._last_t: float | None = None
@@ -114,36 +93,64 @@ class Mission:
         return self._ground
 
     @property
+    def heading_offset(self) -> float:
+        """What is added to the trajectory's yaw [rad]: the heading at take-off for a
+        free-heading trajectory, else the whole turns that make the heading continuous."""
+        return self._offset
+
+    @property
     def trajectory_time(self) -> float:
         """Seconds of trajectory flown so far (HOLD pauses it)."""
         return self._track_clock
 
-    def enter(self, state: State, t: float, position: FloatArray) -> None:
+    def enter(self, state: State, t: float, position: FloatArray, yaw: float = 0.0) -> None:
         """Tell the mission the supervisor entered ``state`` at ``t`` with the vehicle at
-        ``position``."""
+        ``position`` (NED [m]) and heading ``yaw`` [rad]."""
         if state is State.TAKEOFF:
-            self._ground = position.copy()
-            start = self._trajectory(0.0).position
-            above = np.array([position[0], position[1], start[2]])
-            first = _Segment(t + self._spool, position.copy(), above, self._climb)
-            second = _Segment(first.t0 + first.duration, above, start.copy(), self._climb)
-            self._path = [first, second]
-        elif state is State.HOLD:
-            self._hold_point = position.copy()
+            resumed = self._state is State.HOLD
+            if not resumed:
+                self._ground = position.copy()
+            self._plan_takeoff(t if resumed else t + self._spool, position, yaw, resumed)
         elif state is State.LAND:
             end = np.array([position[0], position[1], self._ground[2] + self._depth])
-            self._path = [_Segment(t, position.copy(), end, self._land)]
-        elif state is not State.TRACK:
+            self._path = [self._move(t, position, end, self._land)]
+            self._turn = None
+        elif state is not State.TRACK:  # HOLD, DISARM and the terminal states: stay
             self._rest_point = position.copy()
+        if state is not State.TAKEOFF and state is not State.TRACK:
+            self._heading = yaw
         self._state = state
         self._last_t = t  # time before this phase never advances the trajectory clock
 
+    def _move(self, t0: float, start: FloatArray, end: FloatArray,
+              speed: float) -> MinJerkSegment:
+        """A move at the mean ``speed`` (as long as at constant speed; the peak is 15/8 of
+        it) unless the acceleration limit asks for longer."""
+        length = float(np.linalg.norm(end - start))
+        duration = max(length / speed, min_jerk_duration(length, math.inf, self._accel))
+        return MinJerkSegment(t0, start.copy(), end.copy(), duration)
+
+    def _plan_takeoff(self, t0: float, position: FloatArray, yaw: float, resumed: bool) -> None:
+        """Climb, then move to the start; turn to the start heading from the top of the climb."""
+        start = self._trajectory.sample(0.0)
+        above = np.array([position[0], position[1], start.position[2]])
+        climb = self._move(t0, position, above, self._climb)
+        self._path = [climb, self._move(climb.end_time, above, start.position, self._climb)]
+        if not resumed:
+            self._heading = yaw
+            self._offset = yaw if self._trajectory.free_heading else 0.0
+        target = start.yaw + self._offset
+        target = yaw + wrap_angle(target - yaw)  # the shortest way from where it points
+        self._offset = target - start.yaw  # so TRACK continues the heading without a jump
+        turn = min_jerk_duration(target - yaw, self._yaw_rate, self._yaw_accel)
+        self._turn = MinJerkSegment(climb.end_time, np.array([yaw]), np.array([target]), turn)
+
     def takeoff_done(self, t: float, position: FloatArray) -> bool:
-        """True when the take-off path is complete and the vehicle is at its end."""
+        """True when the take-off moves are complete and the vehicle is at the start."""
         if self._state is not State.TAKEOFF or not self._path:
             return False
         last = self._path[-1]
-        finished = t >= last.t0 + last.duration
+        finished = t >= last.end_time and (self._turn is None or t >= self._turn.end_time)
         return finished and float(np.linalg.norm(position - last.end)) < self._tol
 
     def trajectory_done(self) -> bool:
@@ -151,33 +158,39 @@ class Mission:
         return self._track_clock >= self.duration_s
 
     def preview(self, t: float, lead: float) -> Reference:
-        """The reference ``lead`` seconds after ``t`` in the current phase, without advancing
-        the trajectory clock (call after :meth:`reference` for the same ``t``)."""
-        state = self._state
-        if state is State.TRACK:
-            return self._trajectory(self._track_clock + lead)
-        if state in (State.TAKEOFF, State.LAND) and self._path:
-            ahead = t + lead
-            seg = next((s for s in self._path if ahead < s.t0 + s.duration), self._path[-1])
-            pos, vel = seg.at(ahead)
-            return Reference(ahead, pos, vel)
-        if state is State.HOLD:
-            return Reference(t + lead, self._hold_point.copy(), np.zeros(3))
-        return Reference(t + lead, self._rest_point.copy(), np.zeros(3))
+        """What :meth:`reference` would return at ``t + lead`` in the current phase, without
+        advancing the trajectory clock (no side effects)."""
+        ahead = t + lead
+        return self._at(ahead, self._track_clock + self._elapsed(ahead))
 
     def reference(self, t: float) -> Reference:
         """The reference at time ``t`` for the current phase."""
-        dt = 0.0 if self._last_t is None else max(t - self._last_t, 0.0)
+        self._track_clock += self._elapsed(t) if self._state is State.TRACK else 0.0
         self._last_t = t
+        return self._at(t, self._track_clock)
+
+    def _elapsed(self, t: float) -> float:
+        """Seconds since the last reference, none in a phase other than TRACK."""
+        if self._state is not State.TRACK or self._last_t is None:
+            return 0.0
+        return max(t - self._last_t, 0.0)
+
+    def _at(self, t: float, clock: float) -> Reference:
+        """The reference at ``t`` with the trajectory clock at ``clock``."""
         state = self._state
         if state is State.TRACK:
-            self._track_clock += dt
-            return self._trajectory(self._track_clock)
+            ref = self._trajectory.sample(clock)
+            return dataclasses.replace(ref, yaw=ref.yaw + self._offset)
         if state in (State.TAKEOFF, State.LAND) and self._path:
-            seg = next((s for s in self._path if t < s.t0 + s.duration), self._path[-1])
             # before the first segment starts, at() clamps to its start: the ground
-            pos, vel = seg.at(t)
-            return Reference(t, pos, vel)
-        if state is State.HOLD:
-            return Reference(t, self._hold_point.copy(), np.zeros(3))
-        return Reference(t, self._rest_point.copy(), np.zeros(3))
+            seg = next((s for s in self._path if t < s.end_time), self._path[-1])
+            p, v, a, j = seg.at(t)
+            yaw, yaw_rate = self._heading, 0.0
+            if self._turn is not None:
+                y, dy, _, _ = self._turn.at(t)
+                yaw, yaw_rate = float(y[0]), float(dy[0])
+            return Reference(t=t, position=p, velocity=v, acceleration=a, jerk=j, yaw=yaw,
+                             yaw_rate=yaw_rate)
+        # HOLD, the ground phases and a TAKEOFF or LAND without a path: stay where it was
+        return Reference(t=t, position=self._rest_point.copy(), velocity=np.zeros(3),
+                         yaw=self._heading)

@@ -48,6 +48,12 @@ Fields (frames: NED earth, FRD body; quaternions scalar-first, R(q) = eCb)::
     ref_position (3,)    m        reference, NED (NaN when there is none)
     ref_velocity (3,)    m/s      reference velocity, NED
     ref_yaw              rad      reference heading
+    ref_acceleration (3,) m/s^2   reference acceleration, NED
+    ref_jerk     (3,)    m/s^3    reference jerk, NED
+    ref_yaw_rate         rad/s    reference heading rate
+    preview_*                     the reference the controller looked ahead to for its
+                                  feed-forward (lead_s later), same fields and units as
+                                  ref_*; NaN when it asked for none or did not run
     cmd_pitch, cmd_roll, cmd_yaw  RC unit  the COMMAND's stick values, -2048..2047
                                   (thesis signs; after the channel handover)
     cmd_thrust           RC unit  0..4096
@@ -84,7 +90,7 @@ from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Stick
 
 log = structlog.get_logger(__name__)
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 """Bumped whenever :data:`RECORD_DTYPE` changes; stored in meta.json."""
 
 _XYZ = ("x", "y", "z")
@@ -117,6 +123,15 @@ _SCHEMA: tuple[tuple[str, str, tuple[str, ...] | None, str | tuple[str, ...]], .
     ("ref_position", "<f8", _XYZ, "m"),
     ("ref_velocity", "<f8", _XYZ, "m/s"),
     ("ref_yaw", "<f8", None, "rad"),
+    ("ref_acceleration", "<f8", _XYZ, "m/s^2"),
+    ("ref_jerk", "<f8", _XYZ, "m/s^3"),
+    ("ref_yaw_rate", "<f8", None, "rad/s"),
+    ("preview_position", "<f8", _XYZ, "m"),
+    ("preview_velocity", "<f8", _XYZ, "m/s"),
+    ("preview_yaw", "<f8", None, "rad"),
+    ("preview_acceleration", "<f8", _XYZ, "m/s^2"),
+    ("preview_jerk", "<f8", _XYZ, "m/s^3"),
+    ("preview_yaw_rate", "<f8", None, "rad/s"),
     ("cmd_pitch", "<i2", None, "RC unit"),
     ("cmd_roll", "<i2", None, "RC unit"),
     ("cmd_yaw", "<i2", None, "RC unit"),
@@ -132,6 +147,12 @@ _SCHEMA: tuple[tuple[str, str, tuple[str, ...] | None, str | tuple[str, ...]], .
     ("jitter", "<f8", None, "s"),
     ("latency", "<f8", None, "s"),
 )
+
+_REFERENCE_FIELDS = {
+    prefix: tuple(f"{prefix}_{name}" for name in
+                  ("position", "velocity", "yaw", "acceleration", "jerk", "yaw_rate"))
+    for prefix in ("ref", "preview")
+}
 
 RECORD_DTYPE = np.dtype([
     (name, typ) if comps is None else (name, typ, (len(comps),))
@@ -320,7 +341,7 @@ class FlightRecorder:
         self, *, t: float, imu: ImuSample, gyro_counts: Sequence[int], acc_counts: Sequence[int],
         pose: Pose | None, estimate: StateEstimate | None, reference: Reference | None,
         command: CommandMsg, controller: Sticks | None, sent: bool, state: int,
-        compute_time: float, jitter: float, latency: float,
+        compute_time: float, jitter: float, latency: float, preview: Reference | None = None,
     ) -> None:
         """Record one tick (hot path: no validation, no allocation).
 
@@ -328,6 +349,7 @@ class FlightRecorder:
         imu : the IMU sample of this tick; gyro_counts, acc_counts: its raw (3,) counts
         pose : the Vicon pose used this tick, or None (vicon_valid False, NaN values)
         estimate, reference : None before they exist (NaN values)
+        preview : the controller's look-ahead reference, None if none (NaN values)
         command : the COMMAND of this tick; sent : whether it was written
         controller : the controller's sticks before the handover (None: it did not run)
         state : supervisor state as an int; compute_time, jitter, latency [s]
@@ -346,12 +368,8 @@ class FlightRecorder:
             c["acc"][i] = imu.acc
             self._put_pose(i, pose)
             self._put_estimate(i, estimate)
-            if reference is None:
-                c["ref_position"][i] = c["ref_velocity"][i] = c["ref_yaw"][i] = np.nan
-            else:
-                c["ref_position"][i] = reference.position
-                c["ref_velocity"][i] = reference.velocity
-                c["ref_yaw"][i] = reference.yaw
+            self._put_reference(i, "ref", reference)
+            self._put_reference(i, "preview", preview)
             c["cmd_pitch"][i] = command.pitch
             c["cmd_roll"][i] = command.roll
             c["cmd_yaw"][i] = command.yaw
@@ -373,6 +391,21 @@ class FlightRecorder:
         self._n = i + 1
         if self._n == self._capacity or t >= self._flush_due:
             self.flush(t)
+
+    def _put_reference(self, i: int, prefix: str, ref: Reference | None) -> None:
+        c = self._cols
+        names = _REFERENCE_FIELDS[prefix]
+        if ref is None:
+            for name in names:
+                c[name][i] = np.nan
+            return
+        pos, vel, yaw, acc, jerk, rate = names
+        c[pos][i] = ref.position
+        c[vel][i] = ref.velocity
+        c[yaw][i] = ref.yaw
+        c[acc][i] = ref.acceleration
+        c[jerk][i] = ref.jerk
+        c[rate][i] = ref.yaw_rate
 
     def _put_pose(self, i: int, pose: Pose | None) -> None:
         c = self._cols

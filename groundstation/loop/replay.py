@@ -3,10 +3,11 @@
 The estimator is fed the logged IMU samples and Vicon poses tick by tick through
 the flight core's own estimator step (initialisation included), and its
 estimate is compared with the logged one. The controller is fed the *logged*
-estimate and reference, so its differences are its own, not the estimator's;
-its sticks are compared with the logged controller sticks (before the channel
-handover). The supervisor and mission are not re-run: the logged reference and
-states drive the replay.
+estimate, reference and look-ahead reference, on the ticks a COMMAND went out
+(it steps once per COMMAND), and is told what the COMMAND carried, so its
+differences are its own, not the estimator's; its sticks are compared with the
+logged controller sticks (before the channel handover). The supervisor and
+mission are not re-run: the logged references and states drive the replay.
 
 With the configuration the flight used, the differences measure how exactly a
 flight can be reproduced (the log keeps one Vicon pose per tick, so a tick that
@@ -22,14 +23,16 @@ from dataclasses import dataclass
 import numpy as np
 import yaml
 
+from groundstation.asctec.messages import ALL_CHANNELS_MASK
 from groundstation.config import GroundStationConfig, validate_config
 from groundstation.control.sticks import StickParams, to_sticks
 from groundstation.loop.core import FlightCore
 from groundstation.loop.inputs import quadrotor_params
 from groundstation.loop.recorder import read_flight
 from groundstation.loop.supervisor import State
+from groundstation.model import inputs_from_sticks
 from groundstation.model.quaternion import conjugate, multiply
-from groundstation.types import ImuSample, Pose, Reference, StateEstimate
+from groundstation.types import ControlOutput, ImuSample, Pose, Reference, StateEstimate, Sticks
 
 _CONTROLLED = frozenset({State.TAKEOFF, State.TRACK, State.HOLD, State.LAND})
 
@@ -79,6 +82,17 @@ def _logged_estimate(row: np.void) -> StateEstimate:
     )
 
 
+def _logged_reference(row: np.void, prefix: str) -> Reference:
+    """The reference (``ref``) or look-ahead reference (``preview``) of a log row."""
+    return Reference(
+        float(row["t"]), np.array(row[f"{prefix}_position"], dtype=float),
+        np.array(row[f"{prefix}_velocity"], dtype=float),
+        acceleration=np.array(row[f"{prefix}_acceleration"], dtype=float),
+        yaw=float(row[f"{prefix}_yaw"]), jerk=np.array(row[f"{prefix}_jerk"], dtype=float),
+        yaw_rate=float(row[f"{prefix}_yaw_rate"]),
+    )
+
+
 def _angle(q_a: np.ndarray, q_b: np.ndarray) -> float:
     d = multiply(conjugate(q_a), q_b)
     return 2.0 * math.atan2(float(np.linalg.norm(d[1:])), abs(float(d[0])))
@@ -90,7 +104,8 @@ def replay_flight(log: str, config: GroundStationConfig | None = None) -> Replay
     rows, _meta, config_text = read_flight(log)
     cfg = config if config is not None else validate_config(yaml.safe_load(config_text), log)
     core = FlightCore(cfg)
-    sticks_params = StickParams.from_quadrotor(quadrotor_params(cfg))
+    quad = quadrotor_params(cfg)
+    sticks_params = StickParams.from_quadrotor(quad)
     pos_sq, pos_max, att_max, n_est = 0.0, 0.0, 0.0, 0
     stick_max = np.zeros(4, dtype=int)
     n_ctrl = 0
@@ -115,13 +130,19 @@ def replay_flight(log: str, config: GroundStationConfig | None = None) -> Replay
             att_max = max(att_max, _angle(est.quaternion, np.asarray(row["est_quaternion"])))
             n_est += 1
         state = State(int(row["state"]))
-        if state is State.TAKEOFF and previous_state is not State.TAKEOFF:
+        if state is State.TAKEOFF and previous_state is State.PREFLIGHT:
             core.controller.reset()
         previous_state = state
-        if state in _CONTROLLED and logged_ok:
-            ref = Reference(float(row["t"]), np.array(row["ref_position"], dtype=float),
-                            np.array(row["ref_velocity"], dtype=float), yaw=float(row["ref_yaw"]))
-            out = core.controller.step(float(row["t"]), _logged_estimate(row), ref)
+        if state in _CONTROLLED and logged_ok and bool(row["cmd_sent"]):
+            ref = _logged_reference(row, "ref")
+            preview = _logged_reference(row, "preview")
+            out = core.controller.step(float(row["t"]), _logged_estimate(row), ref,
+                                       preview if math.isfinite(preview.yaw) else None)
+            sent = Sticks(roll=int(row["cmd_roll"]), pitch=int(row["cmd_pitch"]),
+                          yaw=int(row["cmd_yaw"]), thrust=int(row["cmd_thrust"]))
+            u = inputs_from_sticks(sent, quad)
+            core.controller.sent(ControlOutput(omega=u[0:3], f_z=float(u[3])),
+                                 int(row["cmd_mask"]) == ALL_CHANNELS_MASK)
             sticks, _ = to_sticks(out, sticks_params)
             logged = (row["ctrl_roll"], row["ctrl_pitch"], row["ctrl_yaw"], row["ctrl_thrust"])
             replayed = (sticks.roll, sticks.pitch, sticks.yaw, sticks.thrust)

@@ -15,6 +15,7 @@ States and transitions::
       HOLD and Vicon back                      -> the state HOLD interrupted
       HOLD and Vicon silent > vicon_loss_land_s -> LAND
       outside the volume or tilt > max         -> LAND
+      TAKEOFF not done after takeoff_timeout_s -> LAND
       LAND and tilt > handback tilt            -> HANDBACK (the landing lost the attitude)
     any state:
       estimator diverged                       -> HANDBACK (mask 0 at once)
@@ -76,6 +77,8 @@ class SupervisorLimits:
     vicon_loss_land_s: float = 2.0
     link_loss_s: float = 0.3
     preflight_timeout_s: float = 10.0
+    takeoff_timeout_s: float = 20.0
+    """A take-off that has not reached the trajectory's start in this time lands."""
     min_data_rate_hz: float = 80.0
     min_vicon_rate_hz: float = 8.0
     takeoff_tolerance_m: float = 0.1
@@ -185,14 +188,17 @@ class Supervisor:
         """Seconds since the last transition."""
         return t - self._t_state
 
-    def _go(self, t: float, new: State, reason: str) -> State:
+    def _go(self, t: float, new: State, reason: str, *, failsafe: bool = False) -> State:
+        """Change state; a failsafe (and every state that takes the plan away) is logged
+        as a warning."""
         old = self.state
         self.transitions.append(Transition(t, old, new, reason))
         self.state = new
         self._t_state = t
-        level = "warning" if new in (State.HOLD, State.HANDBACK, State.PILOT,
-                                     State.LINK_LOST, State.ABORTED) else "info"
-        getattr(log, level)("supervisor", old=old.name, new=new.name, reason=reason, t=round(t, 3))
+        level = "warning" if failsafe or new in (State.HOLD, State.HANDBACK, State.PILOT,
+                                                 State.LINK_LOST, State.ABORTED) else "info"
+        getattr(log, level)("supervisor", old=old.name, new=new.name, reason=reason, t=round(t, 3),
+                            failsafe=failsafe)
         return new
 
     def update(self, obs: Observation) -> State:
@@ -279,15 +285,21 @@ class Supervisor:
     def _takeoff(self, obs: Observation) -> State:
         failsafe = self._airborne_failsafe(obs)
         if failsafe is not None:
-            return self._go(obs.t, *failsafe)
+            return self._go(obs.t, *failsafe, failsafe=True)
         if obs.takeoff_done:
             return self._go(obs.t, State.TRACK, "take-off height reached")
+        timeout = self.limits.takeoff_timeout_s
+        if obs.t - self._t_state > timeout:
+            x, y, z = obs.position
+            return self._go(obs.t, State.LAND, f"take-off timeout: the trajectory's start not "
+                            f"reached in {timeout:.1f} s (at ({x:.2f}, {y:.2f}, {z:.2f}))",
+                            failsafe=True)
         return self.state
 
     def _track(self, obs: Observation) -> State:
         failsafe = self._airborne_failsafe(obs)
         if failsafe is not None:
-            return self._go(obs.t, *failsafe)
+            return self._go(obs.t, *failsafe, failsafe=True)
         if obs.trajectory_done:
             return self._go(obs.t, State.LAND, "trajectory complete")
         return self.state
@@ -295,7 +307,7 @@ class Supervisor:
     def _hold(self, obs: Observation) -> State:
         failsafe = self._airborne_failsafe(obs)
         if failsafe is not None:
-            return self._go(obs.t, *failsafe)
+            return self._go(obs.t, *failsafe, failsafe=True)
         if obs.vicon_age_s <= self.limits.vicon_loss_hold_s:
             return self._go(obs.t, self._held, "Vicon back")
         return self.state
@@ -306,7 +318,7 @@ class Supervisor:
                             f"{math.degrees(obs.tilt_rad):.0f} deg, the pilot takes over")
         failsafe = self._airborne_failsafe(obs)
         if failsafe is not None:
-            return self._go(obs.t, *failsafe)
+            return self._go(obs.t, *failsafe, failsafe=True)
         lim = self.limits
         contact = (obs.lift_fraction < lim.contact_lift_fraction
                    and abs(obs.specific_force_g - 1.0) < lim.contact_accel_tolerance)
