@@ -324,12 +324,13 @@ def synth_hinf(
                           integral_scale=integral)  # type: ignore[arg-type]  # 4 by validation
     robust = h.robust_range if rate_loop else 0.0
     if robust > 0.0:
-        typer.echo(f"robust design for rate gains and rate-loop lag within +-{100 * robust:g} "
-                   "% (a few minutes)", err=True)
+        typer.echo(f"robust design for rate gains, rate-loop lag and thrust within "
+                   f"+-{100 * robust:g} %", err=True)
     try:
         gain = synthesise_hinf(quadrotor_params(cfg), include_rate_loop=rate_loop,
                                weights=weights, robust_range=robust,
-                               pole_radius=h.pole_radius_rad_s if rate_loop else None)
+                               pole_radius=h.pole_radius_rad_s if rate_loop else None,
+                               min_decay=h.min_decay_per_s if rate_loop else None)
     except GroundStationError as exc:  # also: cvxpy (the `hinf` extra) not installed
         raise _fail(str(exc), 1) from exc
     gain.save(out)

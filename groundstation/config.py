@@ -341,15 +341,18 @@ class HinfConfig(_Model):
     reference_pole: PositiveFloat = 1.0  # a_i of W_r (eq. 10.10) [rad/s], tuned
     noise_gain: PositiveFloat = 0.01  # k of W_n (eq. 10.9), tuned
     integral_scale: list[float] | None = Field(
-        default_factory=lambda: [0.3, 0.3, 0.3, 0.1], min_length=4, max_length=4)
+        default_factory=lambda: [0.3, 0.3, 1.0, 0.1], min_length=4, max_length=4)
     # weights of the integrated [x, y, z, q3] errors (beyond the thesis: zero steady-state
     # error under a thrust-map error, issue 13); null: the thesis's design, no integrators
     robust_range: float = Field(0.3, ge=0.0, lt=1.0)
-    # design for rate gains and rate-loop time constant within +- this fraction (issue 13:
-    # 30 %); 0 = the nominal plant only, as the thesis
-    pole_radius_rad_s: PositiveFloat | None = 10.0
+    # design for rate gains, rate-loop time constant and thrust per newton within +- this
+    # fraction (issue 13: 30 %); 0 = the nominal plant only, as the thesis
+    pole_radius_rad_s: PositiveFloat | None = 12.0
     # keep the closed-loop poles in this disc: no loop faster than the 50 Hz, ~40 ms
     # delayed command link carries; null = unconstrained, as the thesis
+    min_decay_per_s: PositiveFloat | None = 0.6
+    # and left of -min_decay: no loop slower (tuned on `gs eval --perturb`; must stay
+    # below reference_pole); null = unconstrained, as the thesis
     integral_limit: PositiveFloat = 2.0  # anti-windup clamp on each integrated error [m s]
 
 

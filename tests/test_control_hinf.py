@@ -33,7 +33,8 @@ from groundstation.errors import ControlError
 from groundstation.model import QuadrotorParams
 
 PARAMS = QuadrotorParams()
-LAB_TAU, LAB_DELAY, DT = 0.064, 0.02, 0.01  # the virtual lab's rate loop and command delay
+LAB_TAU, LAB_DELAY, DT = 0.064, 0.02, 0.01  # the virtual lab's rate loop and command delay;
+# DT: the thesis-model findings are checked at 100 Hz, as before the 50 Hz commands
 
 
 @pytest.fixture(scope="module")
@@ -64,11 +65,72 @@ def test_thesis_gain_does_not_stabilise_the_rate_loop_lag(thesis_gain: HinfGain)
 
 
 def test_gain_designed_with_the_lag_stabilises_the_lagged_plant(lag_gain: HinfGain) -> None:
-    assert lag_gain.include_rate_loop and lag_gain.rate_tau == pytest.approx(0.077)
-    for tau in (LAB_TAU, lag_gain.rate_tau):  # the lab's lag and the design's own
+    assert lag_gain.include_rate_loop and lag_gain.rate_tau == pytest.approx(LAB_TAU)
+    assert lag_gain.robust_range == pytest.approx(0.3) and lag_gain.F_i.shape == (4, 4)
+    for tau in (0.7 * LAB_TAU, LAB_TAU, 1.3 * LAB_TAU):  # the range it was designed for
         A, B = plant_model(PARAMS, include_rate_loop=True, rate_tau=tau)
-        assert continuous_closed_loop(A, B, lag_gain.F_s).real.max() < -0.3
-        assert discrete_spectral_radius(A, B, lag_gain.F_s, DT, LAB_DELAY) < 0.995  # 0.9913
+        assert continuous_closed_loop(A, B, lag_gain.F_s).real.max() < -1.0  # -1.67..-1.89
+        # at the 50 Hz command period with the command delay: 0.962-0.964
+        assert discrete_spectral_radius(A, B, lag_gain.F_s, 0.02, LAB_DELAY) < 0.975
+
+
+def _sampled_loop_radius(gain: HinfGain, k_rate: float, tau: float, k_thrust: float,
+                         delay: float, motor_tau: float = 0.02, dt: float = 0.02) -> float:
+    """Spectral radius of the sampled loop ``u = F_s x + F_i x_i`` on the lagged hover
+    model with its rate gains scaled by ``k_rate``, thrust per newton by ``k_thrust``, a
+    first-order motor lag on the lift, and the input ``delay`` (an independent build of
+    the closed loop from the continuous model: exact ZOH, delay as in Astrom-Wittenmark)."""
+    from groundstation.control.lqr_design import discretise_delayed
+    from groundstation.model import hover_model_rate_lag
+
+    model = hover_model_rate_lag(PARAMS, tau)
+    A, B = np.zeros((13, 13)), np.zeros((13, 4))
+    A[:12, :12], B[:12, :3] = model.A, k_rate * model.B[:, :3]
+    A[8, 12], A[12, 12], B[12, 3] = 1.0 / PARAMS.mass, -1.0 / motor_tau, k_thrust / motor_tau
+    Phi, Gamma, _ = discretise_delayed(A, B, dt, delay)
+    n = Phi.shape[0]
+    M = np.zeros((n + 4, n + 4))
+    M[:n, :n] = Phi
+    K = np.zeros((4, n + 4))
+    K[:, :12], K[:, n:] = gain.F_s, gain.F_i
+    M[:n] += Gamma @ K
+    M[n + np.arange(4), [0, 1, 2, 5]] = -dt  # x_i += dt (r - y), r = 0
+    M[n:, n:] += np.eye(4)
+    return float(np.max(np.abs(np.linalg.eigvals(M))))
+
+
+@pytest.mark.parametrize("k_rate", [0.7, 1.3])
+@pytest.mark.parametrize("tau_scale", [0.7, 1.3])
+@pytest.mark.parametrize("k_thrust", [0.7, 1.3])
+def test_robust_gain_is_stable_over_the_uncertainty_box(lag_gain: HinfGain, k_rate: float,
+                                                        tau_scale: float,
+                                                        k_thrust: float) -> None:
+    """Issue 13: stable with each rate gain 30 % off (and the rate loop's time constant,
+    mass and thrust map off), at 50 Hz with 5-30 ms of command delay plus the frames'
+    11 ms on the wire and a 20 ms motor lag the design never saw. Reached <= 0.987."""
+    for delay in (0.016, 0.041):
+        assert _sampled_loop_radius(lag_gain, k_rate, tau_scale * LAB_TAU, k_thrust,
+                                    delay) < 0.995
+
+
+def test_old_rate_loop_design_fed_the_yaw_rate_back_positively(lag_gain: HinfGain) -> None:
+    """The first rate-loop design (the thesis's own fix, no robustness) had F[psi_dot] =
+    +0.80: a yaw rate gain 36 % high made k F > 1, the rate loop lost its damping and the
+    heading spun. The robust gain stays stable with every yaw gain up to +30 %, and its
+    yaw loop alone (q3, omega_z) with +36 %."""
+    from groundstation.control.lqr_design import discretise_delayed
+
+    for k in (1.0, 1.36):
+        A = np.array([[0.0, 0.5], [0.0, -1.0 / LAB_TAU]])
+        B = np.array([[0.0], [k / LAB_TAU]])
+        Phi, Gamma, _ = discretise_delayed(A, B, 0.02, 0.031)
+        K = np.zeros((1, Phi.shape[0]))
+        K[0, :2] = lag_gain.F_s[2, [5, 11]]
+        M = np.zeros((Phi.shape[0] + 1, Phi.shape[0] + 1))
+        M[:-1, :-1] = Phi + Gamma @ K
+        M[:-1, -1:] = Gamma * lag_gain.F_i[2, 3]
+        M[-1, 0], M[-1, -1] = -0.02, 1.0  # heading integrator: x_i += dt (0 - q3)
+        assert np.max(np.abs(np.linalg.eigvals(M))) < 1.0
 
 
 def test_findings_hold_on_the_nonlinear_model(thesis_gain: HinfGain, lag_gain: HinfGain) -> None:
@@ -82,7 +144,9 @@ def test_findings_hold_on_the_nonlinear_model(thesis_gain: HinfGain, lag_gain: H
     assert tilt.max() > np.radians(30) or not np.all(np.isfinite(bad.position))
     good = simulate(HinfController(lag_gain), step, 10.0, plant=lab)
     assert abs(good.position[-1, 0] - 0.3) < 0.01
-    assert np.max(np.abs(good.position[:, 0])) < 0.3 * 1.2  # reached 13 % overshoot
+    # reached 37 % overshoot: the integrators see the whole raw step (the flight's
+    # references are shaped; the thesis's set-point steps are not)
+    assert np.max(np.abs(good.position[:, 0])) < 0.3 * 1.45
 
 
 def test_standard_problem_structure() -> None:

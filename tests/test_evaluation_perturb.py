@@ -34,7 +34,7 @@ from groundstation.evaluation.perturb import (
     perturbation,
     plant_row,
 )
-from groundstation.evaluation.scenarios import RATE_GAINS_ONLY, select
+from groundstation.evaluation.scenarios import select
 from groundstation.evaluation.suite import plant_for
 from sim_device.params import LabParams
 
@@ -106,10 +106,12 @@ def test_the_lab_built_from_a_drawn_plant_differs_from_the_model() -> None:
         assert LabParams.from_config(reread) == lab
 
 
-def test_h_infinity_hovers_take_only_the_drawn_rate_gains() -> None:
+def test_a_scenario_keeps_its_own_overrides_over_the_drawn_plant() -> None:
     drawn = perturbation(4)
-    hinf = select(["hinf-rate-loop-model"])[0]
-    assert set(plant_for(hinf, drawn)) == set(RATE_GAINS_ONLY)
+    low = select(["hinf-rate-gains-low"])[0]  # rate gains exactly 30 % low, the rest drawn
+    taken = plant_for(low, drawn)
+    assert "sim.k_rate_scale" not in taken
+    assert set(taken) == set(drawn) - {"sim.k_rate_scale"}
     square = select(["square-shaped-lqr-ff"])[0]
     assert plant_for(square, drawn) == drawn
 

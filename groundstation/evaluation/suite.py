@@ -12,8 +12,7 @@ metrics are then the worst case over the seeds
 its record (for the figures) is that of its worst flight: one that did not complete,
 else the one with the largest RMS error. Scenario overrides take precedence over the
 drawn plant (the thrust-error flights keep their 10 %, the H-infinity rate-gain
-flights their gains), and a scenario may take only part of it (``Scenario.perturbs``:
-the H-infinity hovers take the rate gains).
+flights their gains).
 """
 
 from __future__ import annotations
@@ -161,9 +160,9 @@ def _worse(a: dict[str, Any], b: dict[str, Any]) -> bool:
 
 
 def plant_for(scenario: Scenario, plant: Mapping[str, Any]) -> dict[str, Any]:
-    """The overrides of a drawn ``plant`` that ``scenario`` takes (``Scenario.perturbs``)."""
-    keys = scenario.perturbs
-    return {k: v for k, v in plant.items() if keys is None or k in keys}
+    """The overrides of a drawn ``plant`` for ``scenario``: the plant, where the scenario's
+    own overrides do not say otherwise (they are applied after it)."""
+    return {k: v for k, v in plant.items() if k not in scenario.overrides}
 
 
 def fly_perturbed(scenario: Scenario, config: GroundStationConfig,

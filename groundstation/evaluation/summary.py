@@ -41,8 +41,7 @@ def _scenario_json(o: ScenarioOutcome) -> dict[str, Any]:
         "transitions": transitions_json(o.record.transitions, float(o.record.t[0])),
     }
     if o.runs:
-        out.update({"perturbs": list(s.perturbs) if s.perturbs is not None else "all",
-                    "worst_seed": o.seed_of, "failed_seeds": list(o.failed),
+        out.update({"worst_seed": o.seed_of, "failed_seeds": list(o.failed),
                     "record_seed": o.record_seed,
                     "seeds": {str(seed): {"metrics": r.metrics, "transitions": r.transitions,
                                           "wall_s": r.wall_s} for seed, r in o.runs.items()}})
