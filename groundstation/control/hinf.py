@@ -15,10 +15,10 @@ is *robust*: synthesised with integrators in the standard problem, at the
 vertices of the rate-gain, rate-loop and thrust uncertainty (+-30 % each) with one
 Lyapunov matrix per axis, and with its poles kept in a disc the 50 Hz, delayed
 command link can carry, and left of a minimum decay rate (:func:`synthesise_hinf`
-with ``robust_range``, ``pole_radius`` and ``min_decay``). The first design with the rate-loop lag (the thesis's own
-Ch. 10.3 fix) fed the yaw rate back positively: with the yaw rate gain 36 %
-above the configured one the rate loop lost its own damping and the heading
-went into a limit cycle.
+with ``robust_range``, ``pole_radius`` and ``min_decay``). The first design with
+the rate-loop lag (the thesis's own Ch. 10.3 fix) fed the yaw rate back
+positively: with the yaw rate gain 36 % above the configured one the rate loop
+lost its own damping and the heading went into a limit cycle.
 """
 
 from __future__ import annotations
