@@ -39,7 +39,7 @@ def test_replay_with_the_flight_config_reproduces_it(tmp_path: Path) -> None:
 
     # A different controller tuning shows up as stick differences, not as a crash.
     cfg = load_config(REPO / "config" / "sim.yaml")
-    softer = apply_overrides(cfg, {"controller.lqr.q_error": [1.0, 1.0, 5.0, 1.0]})
+    softer = apply_overrides(cfg, {"controller.lqr_ff.q_error": [1.0, 1.0, 5.0, 1.0]})
     changed = replay_flight(log, softer)
     assert max(changed.stick_max) > 10
     assert changed.position_max_m < 1e-9  # the estimator did not change

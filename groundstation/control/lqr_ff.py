@@ -59,7 +59,7 @@ DEFAULT_Q_ERROR = (100.0, 100.0, 100.0, 20.0)
 closed-loop bandwidth on the rate-loop model (tuned, see ``gs eval --perturb``)."""
 DEFAULT_R_INPUT = (1.0, 1.0, 1.0, 0.5)
 """R on [omega_x, omega_y, omega_z, F_z] [1/(rad/s)^2, 1/(rad/s)^2, 1/(rad/s)^2, 1/N^2]."""
-DEFAULT_Q_INTEGRAL = (20.0, 20.0, 20.0, 2.0)
+DEFAULT_Q_INTEGRAL = (20.0, 20.0, 60.0, 2.0)
 """Weights on the integrated [x, y, z, q3] errors [1/(m s)^2, ..., 1/s^2]."""
 
 

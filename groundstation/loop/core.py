@@ -62,6 +62,8 @@ class TickResult:
     sticks : the controller's sticks before handover (None when not commanding)
     preview : the look-ahead reference the controller stepped with this tick (None when
         it did not step or asked for none)
+    automatic : the controller was told the COMMAND it stepped for went out with every
+        channel under its own control, no handover blend (see ``Controller.sent``)
     """
 
     command: CommandMsg
@@ -71,6 +73,7 @@ class TickResult:
     estimate: StateEstimate | None
     sticks: Sticks | None
     preview: Reference | None = None
+    automatic: bool = False
 
 
 def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
@@ -121,6 +124,7 @@ class FlightCore:
         self._sticks: Sticks | None = None  # the controller's sticks of the last COMMAND
         self._command = CommandMsg.release()
         self._preview: Reference | None = None
+        self._automatic = False
         self._weight = quad.mass * quad.g  # [N]
         self._lift_fraction = 1.0  # last commanded lift / weight, for the landing check
         self._command_period = 1.0 / config.serial.command_rate_hz
@@ -170,6 +174,7 @@ class FlightCore:
                 self._next_command = t + self._command_period
         self._was_commanding = commanding
         self._preview = None
+        self._automatic = False
         if not (commanding and self._estimate is not None):
             self._sticks = None
             self._command = CommandMsg.release()
@@ -180,7 +185,7 @@ class FlightCore:
             if state is not State.DISARM:
                 self._report_sent(self._command, t)
         return TickResult(self._command, due, state, reference, self._estimate, self._sticks,
-                          self._preview)
+                          self._preview, self._automatic)
 
     # ------------------------------------------------------------------ steps
     def estimate_step(self, imu: ImuSample | None, poses: Sequence[Pose]) -> StateEstimate | None:
@@ -288,4 +293,5 @@ class FlightCore:
         u = inputs_from_sticks(sticks, self._quad)
         automatic = (command.ctrl == ALL_CHANNELS_MASK
                      and not self.handover.blending(t))
+        self._automatic = automatic
         self.controller.sent(ControlOutput(omega=u[0:3], f_z=float(u[3])), automatic)

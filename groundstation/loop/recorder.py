@@ -59,6 +59,8 @@ Fields (frames: NED earth, FRD body; quaternions scalar-first, R(q) = eCb)::
     cmd_thrust           RC unit  0..4096
     cmd_mask             bits     ctrl mask (bit0 pitch .. bit3 thrust)
     cmd_sent             bool     a COMMAND frame was written this tick
+    cmd_automatic        bool     the controller stepped for it and was told it went out
+                                  with every channel its own (no pilot, no handover blend)
     ctrl_pitch, ctrl_roll, ctrl_yaw, ctrl_thrust
                          RC unit  the controller's sticks before the handover blend
                                   (0 when the controller did not run this tick)
@@ -138,6 +140,7 @@ _SCHEMA: tuple[tuple[str, str, tuple[str, ...] | None, str | tuple[str, ...]], .
     ("cmd_thrust", "<i2", None, "RC unit"),
     ("cmd_mask", "|u1", None, "bits"),
     ("cmd_sent", "|b1", None, "bool"),
+    ("cmd_automatic", "|b1", None, "bool"),
     ("ctrl_pitch", "<i2", None, "RC unit"),
     ("ctrl_roll", "<i2", None, "RC unit"),
     ("ctrl_yaw", "<i2", None, "RC unit"),
@@ -342,6 +345,7 @@ class FlightRecorder:
         pose: Pose | None, estimate: StateEstimate | None, reference: Reference | None,
         command: CommandMsg, controller: Sticks | None, sent: bool, state: int,
         compute_time: float, jitter: float, latency: float, preview: Reference | None = None,
+        automatic: bool = False,
     ) -> None:
         """Record one tick (hot path: no validation, no allocation).
 
@@ -350,7 +354,8 @@ class FlightRecorder:
         pose : the Vicon pose used this tick, or None (vicon_valid False, NaN values)
         estimate, reference : None before they exist (NaN values)
         preview : the controller's look-ahead reference, None if none (NaN values)
-        command : the COMMAND of this tick; sent : whether it was written
+        command : the COMMAND of this tick; sent : whether it was written; automatic :
+            see the ``cmd_automatic`` column
         controller : the controller's sticks before the handover (None: it did not run)
         state : supervisor state as an int; compute_time, jitter, latency [s]
         Values that do not fit (wrong shape, out of the column's range) skip the row
@@ -376,6 +381,7 @@ class FlightRecorder:
             c["cmd_thrust"][i] = command.thrust
             c["cmd_mask"][i] = command.ctrl
             c["cmd_sent"][i] = sent
+            c["cmd_automatic"][i] = automatic
             s = controller if controller is not None else _NO_STICKS
             c["ctrl_pitch"][i] = s.pitch
             c["ctrl_roll"][i] = s.roll

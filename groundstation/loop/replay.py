@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 import yaml
 
-from groundstation.asctec.messages import ALL_CHANNELS_MASK
 from groundstation.config import GroundStationConfig, validate_config
 from groundstation.control.sticks import StickParams, to_sticks
 from groundstation.loop.core import FlightCore
@@ -142,7 +141,7 @@ def replay_flight(log: str, config: GroundStationConfig | None = None) -> Replay
                           yaw=int(row["cmd_yaw"]), thrust=int(row["cmd_thrust"]))
             u = inputs_from_sticks(sent, quad)
             core.controller.sent(ControlOutput(omega=u[0:3], f_z=float(u[3])),
-                                 int(row["cmd_mask"]) == ALL_CHANNELS_MASK)
+                                 bool(row["cmd_automatic"]))
             sticks, _ = to_sticks(out, sticks_params)
             logged = (row["ctrl_roll"], row["ctrl_pitch"], row["ctrl_yaw"], row["ctrl_thrust"])
             replayed = (sticks.roll, sticks.pitch, sticks.yaw, sticks.thrust)

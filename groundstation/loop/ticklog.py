@@ -40,5 +40,5 @@ class TickLogger:
             pose=poses[-1] if poses else None, estimate=result.estimate,
             reference=result.reference, command=result.command, controller=result.sticks,
             sent=result.due, state=int(result.state), compute_time=compute, jitter=jitter,
-            latency=latency, preview=result.preview,
+            latency=latency, preview=result.preview, automatic=result.automatic,
         )
