@@ -36,10 +36,12 @@ def min_jerk(x: float) -> float:
     return 10 * x**3 - 15 * x**4 + 6 * x**5
 
 
-def duration(distance: float, speed: float, accel: float) -> float:
+def duration(distance: float, speed: float, accel: float, jerk: float = 2.0) -> float:
     """A move's duration: as long as at the constant ``speed``, or longer if its peak
-    acceleration 10/sqrt(3) d/T^2 would exceed ``accel``."""
-    return max(distance / speed, math.sqrt(10 / math.sqrt(3) * distance / accel))
+    acceleration 10/sqrt(3) d/T^2 would exceed ``accel`` or its peak jerk 60 d/T^3 the
+    mission's 2 m/s^3."""
+    return max(distance / speed, math.sqrt(10 / math.sqrt(3) * distance / accel),
+               (60.0 * distance / jerk) ** (1.0 / 3.0))
 
 
 def turn_duration(angle: float, rate: float, accel: float) -> float:
@@ -52,11 +54,14 @@ def test_takeoff_climbs_vertically_then_moves_to_the_start() -> None:
     m.enter(State.TAKEOFF, 100.0, np.zeros(3), 0.0)
     climb = duration(1.0, 0.5, 0.5)  # 3.40 s: the acceleration limit binds
     assert climb == pytest.approx(3.398, abs=1e-3)
+    # a 3 mm move lasts 0.45 s, not the 0.19 s the acceleration alone allows: its jerk,
+    # a tilt rate j / g, stays at 2 m/s^3 (0.2 rad/s)
+    assert duration(0.003, 0.5, 0.5) == pytest.approx(0.4481, abs=1e-4)
     for tau in (0.5, 1.0, 1.7, 2.5, climb):
         ref = m.reference(100.0 + tau)
         np.testing.assert_allclose(ref.position, [0, 0, -min_jerk(tau / climb)], atol=1e-12)
     side = float(np.hypot(0.375, 0.375))  # 0.53 m sideways
-    move = duration(side, 0.5, 0.5)  # 2.47 s: the acceleration limit binds again
+    move = duration(side, 0.5, 0.5)  # 2.54 s: the jerk limit binds
     ref = m.reference(100.0 + climb + 1.0)
     np.testing.assert_allclose(ref.position, [*(min_jerk(1.0 / move) * START[:2]), -1.0],
                                atol=1e-12)
@@ -238,3 +243,13 @@ def test_preview_is_the_reference_at_t_plus_lead_without_side_effects(state: Sta
     same(m.preview(9.5, lead), ahead)  # repeatable ...
     same(m.reference(9.6), mission().reference(9.6))  # ... and changes nothing
     same(ahead, mission().reference(9.5 + lead))
+
+
+def test_a_tiny_takeoff_move_stays_gentle() -> None:
+    """Placed 3 mm from the start's x/y: the horizontal move must not ask for the tilt
+    rate of a 0.19 s min-jerk move (35-60 m/s^3 of jerk saturated the rate sticks at the
+    first TRACK tick in the virtual lab): its jerk stays within 2 m/s^3."""
+    m = Mission(Line(), duration_s=10.0, climb_speed=0.5)
+    m.enter(State.TAKEOFF, 0.0, START - np.array([0.003, 0.0, -1.0]), 0.0)
+    jerks = [np.linalg.norm(m.reference(t).jerk[:2]) for t in np.arange(0.0, 8.0, 0.005)]
+    assert 0.1 < max(jerks) <= 2.0 + 1e-9

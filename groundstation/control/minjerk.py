@@ -50,13 +50,17 @@ def smoothstep_integral(x: float) -> float:
     return x4 * (2.5 - 3.0 * x + x * x)
 
 
-def min_jerk_duration(distance: float, max_speed: float, max_accel: float) -> float:
+def min_jerk_duration(distance: float, max_speed: float, max_accel: float,
+                      max_jerk: float = math.inf) -> float:
     """Shortest duration [s] of a rest-to-rest min-jerk move over ``distance`` whose peak
-    speed stays within ``max_speed`` and peak acceleration within ``max_accel``."""
+    speed stays within ``max_speed``, peak acceleration within ``max_accel`` and peak
+    jerk within ``max_jerk``. Without the jerk limit a short move is fast: 3 mm within
+    0.5 m/s^2 takes 0.19 s and asks for 26 m/s^3, a tilt rate of 2.7 rad/s."""
     d = abs(distance)
     if d == 0.0:
         return 0.0
-    return max(PEAK_RATE * d / max_speed, math.sqrt(PEAK_ACCEL * d / max_accel))
+    return max(PEAK_RATE * d / max_speed, math.sqrt(PEAK_ACCEL * d / max_accel),
+               (PEAK_JERK * d / max_jerk) ** (1.0 / 3.0))
 
 
 @dataclass(frozen=True, slots=True)

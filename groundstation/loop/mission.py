@@ -50,6 +50,11 @@ def wrap_angle(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
+MOVE_JERK_M_S3 = 2.0
+"""Peak jerk [m/s^3] of a take-off or landing move: a horizontal jerk j turns the thrust
+at j / g, here 0.2 rad/s, far inside the rate limits whatever the move's length."""
+
+
 class Mission:
     """Reference generator across take-off, tracking, hold and landing.
 
@@ -127,7 +132,8 @@ class Mission:
         """A move at the mean ``speed`` (as long as at constant speed; the peak is 15/8 of
         it) unless the acceleration limit asks for longer."""
         length = float(np.linalg.norm(end - start))
-        duration = max(length / speed, min_jerk_duration(length, math.inf, self._accel))
+        duration = max(length / speed,
+                       min_jerk_duration(length, math.inf, self._accel, MOVE_JERK_M_S3))
         return MinJerkSegment(t0, start.copy(), end.copy(), duration)
 
     def _plan_takeoff(self, t0: float, position: FloatArray, yaw: float, resumed: bool) -> None:
