@@ -45,3 +45,38 @@ def test_bad_time_constant_is_refused() -> None:
     Phi, Gamma = discretise(model.A, model.B, DT)
     with pytest.raises(ValueError, match="tau >= dt"):
         DisturbanceObserver(Phi, Gamma, DT, 0.001)
+
+
+def test_the_lqr_observer_learns_only_from_fully_automatic_commands() -> None:
+    """Issue 13: a step whose COMMAND went out with the pilot on a channel, or during a
+    handover blend, is not the model's input: the estimate holds over it."""
+    from groundstation.control import LqrController
+    from groundstation.types import ControlOutput, Reference, StateEstimate
+
+    def estimate(vz: float) -> StateEstimate:
+        return StateEstimate(t=0.0, position=np.array([0.0, 0.0, -1.0]),
+                             quaternion=np.array([1.0, 0.0, 0.0, 0.0]),
+                             velocity_body=np.array([0.0, 0.0, vz]), omega=np.zeros(3),
+                             gyro_bias=np.zeros(3), acc_bias=np.zeros(3),
+                             covariance_diag=np.zeros(16))
+
+    ref = Reference(0.0, np.array([0.0, 0.0, -1.0]), np.zeros(3))
+    estimates = []
+    for automatic in (True, False):
+        ctrl = LqrController()
+        out = ctrl.step(0.0, estimate(0.0), ref)
+        ctrl.sent(out, automatic)
+        # the vehicle sinks although nothing asked for it: a disturbance, if we know the input
+        ctrl.step(0.02, estimate(0.05), ref)
+        estimates.append(ctrl.disturbance[2])
+    # learned: 0.05 m/s unexplained in one step, times dt / tau / dt = 1 / (1 s)
+    assert estimates[0] == pytest.approx(0.05, abs=0.005)
+    assert estimates[1] == 0.0  # held
+    # the sent command is what the observer's model takes as the input
+    # (with the 31 ms input delay modelled, a command acts on the velocity from the
+    # second period on)
+    ctrl = LqrController()
+    for k in range(4):
+        out = ctrl.step(0.02 * k, estimate(0.0), ref)  # the vehicle does not move ...
+        ctrl.sent(ControlOutput(omega=out.omega, f_z=out.f_z - 1.0), True)  # ... on 1 N more
+    assert ctrl.disturbance[2] > 0.01  # so something pushes down: a disturbance

@@ -224,3 +224,12 @@ def test_channels_handed_to_the_pilot_and_back_at_run_time(tmp_path: Path) -> No
     assert abs(int(rows["cmd_yaw"][half]) - expect) <= 1.0
     after = back[back > first + 110]  # blend over: the controller's value goes out
     np.testing.assert_array_equal(rows["cmd_yaw"][after], rows["ctrl_yaw"][after])
+    # What the controller was told (its disturbance observer learns only from COMMANDs
+    # that went out with every channel its own): not while the pilot has yaw, not
+    # during the blend back, and again once the blend is over.
+    sent = rows["cmd_sent"].astype(bool)
+    assert not rows["cmd_automatic"][manual & sent].any()
+    blend = np.zeros(len(rows), dtype=bool)
+    blend[first:first + 95] = True
+    assert not rows["cmd_automatic"][blend & sent].any()
+    assert rows["cmd_automatic"][after][sent[after]].all()
