@@ -93,6 +93,7 @@ class InputHistory:
 
     def __init__(self, past: int) -> None:
         self.values = np.zeros((past, N_INPUTS))
+        self._flat = self.values.reshape(-1)  # a view, made once
         self._pending = np.zeros(N_INPUTS)
         self._have_pending = False
 
@@ -115,8 +116,8 @@ class InputHistory:
         """Push the last step's input into the history; returns the flattened history
         ``[u(k-1), ..., u(k-l)]`` (4 l,) (a view)."""
         v = self.values
-        if len(v) and self._have_pending:
+        if self._have_pending and len(v):
             v[1:] = v[:-1].copy()
             v[0] = self._pending
         self._have_pending = False
-        return v.reshape(-1)
+        return self._flat

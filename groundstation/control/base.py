@@ -121,7 +121,7 @@ class HeadingFrame:
 
     def update(self, estimate: StateEstimate) -> None:
         """Heading, tilt and heading-frame velocity of ``estimate``."""
-        q0, q1, q2, q3 = (float(x) for x in estimate.quaternion)
+        q0, q1, q2, q3 = estimate.quaternion.tolist()
         if q0 < 0.0:
             q0, q1, q2, q3 = -q0, -q1, -q2, -q3
         psi = math.atan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
@@ -132,7 +132,7 @@ class HeadingFrame:
         # give opposite q_z: the same rotation, the opposite sign)
         sign = 1.0 if ch * q0 + sh * q3 >= 0.0 else -1.0
         self.tilt = (sign * (ch * q1 + sh * q2), sign * (ch * q2 - sh * q1))
-        vx, vy, vz = (float(x) for x in estimate.velocity_body)
+        vx, vy, vz = estimate.velocity_body.tolist()
         # eCb v (eq. 2.20 read as body -> earth), then turned by -psi about the vertical
         n = ((q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) * vx + 2 * (q1 * q2 - q0 * q3) * vy
              + 2 * (q1 * q3 + q0 * q2) * vz)
@@ -140,10 +140,8 @@ class HeadingFrame:
              + 2 * (q2 * q3 - q0 * q1) * vz)
         d = (2 * (q1 * q3 - q0 * q2) * vx + 2 * (q2 * q3 + q0 * q1) * vy
              + (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) * vz)
-        v = self.velocity
-        v[0] = self.cos * n + self.sin * e
-        v[1] = -self.sin * n + self.cos * e
-        v[2] = d
+        c, s = self.cos, self.sin
+        self.velocity[:] = (c * n + s * e, -s * n + c * e, d)
 
     def to_heading(self, x: float, y: float) -> tuple[float, float]:
         """The horizontal earth-axis vector ``(x, y)`` (north, east) in the heading frame."""
@@ -191,17 +189,18 @@ class OutputIntegrator:
         if not self._outputs:
             return
         step = self._dt if undo else -self._dt
-        ie = self.earth
-        ex, ey = frame.to_earth(float(state[0]), float(state[1]))
-        ie[0] += step * ex
-        ie[1] += step * ey
-        ie[2] += step * float(state[2])
-        ie[3] += step * float(state[5])
-        np.clip(ie, -self._limit, self._limit, out=ie)
-        hx, hy = frame.to_heading(float(ie[0]), float(ie[1]))
-        in_frame = (hx, hy, float(ie[2]), float(ie[3]))
-        for k, idx in enumerate(self._outputs):
-            out[k] = in_frame[idx]
+        lim = self._limit
+        x, y, z, _q1, _q2, q3 = state[0:6].tolist()
+        ex, ey = frame.to_earth(x, y)
+        i0, i1, i2, i3 = self.earth.tolist()
+        i0 = min(max(i0 + step * ex, -lim), lim)
+        i1 = min(max(i1 + step * ey, -lim), lim)
+        i2 = min(max(i2 + step * z, -lim), lim)
+        i3 = min(max(i3 + step * q3, -lim), lim)
+        self.earth[:] = (i0, i1, i2, i3)
+        hx, hy = frame.to_heading(i0, i1)
+        in_frame = (hx, hy, i2, i3)
+        out[:] = [in_frame[idx] for idx in self._outputs]
 
 
 def fill_heading_state(frame: HeadingFrame, estimate: StateEstimate, reference: Reference,
@@ -219,10 +218,10 @@ def fill_heading_state(frame: HeadingFrame, estimate: StateEstimate, reference: 
     ``out`` must be a float array of length >= 9; returns it.
     """
     frame.update(estimate)
-    p, r = estimate.position, reference.position
-    out[0], out[1] = frame.to_heading(float(p[0] - r[0]), float(p[1] - r[1]))
-    out[2] = float(p[2] - r[2])
-    out[3], out[4] = frame.tilt
-    out[5] = frame.yaw_error(reference.yaw)
+    px, py, pz = estimate.position.tolist()
+    rx, ry, rz = reference.position.tolist()
+    hx, hy = frame.to_heading(px - rx, py - ry)
+    t1, t2 = frame.tilt
+    out[0:6] = (hx, hy, pz - rz, t1, t2, frame.yaw_error(reference.yaw))
     out[6:9] = frame.velocity
     return out

@@ -39,14 +39,14 @@ class DisturbanceObserver:
         if not tau >= dt > 0.0:
             raise ValueError(f"need tau >= dt > 0, found tau={tau!r}, dt={dt!r}")
         n = Phi.shape[0]
-        self._Phi_v = np.ascontiguousarray(Phi[V_ROWS, :n])
-        self._Gamma_v = np.ascontiguousarray(Gamma[V_ROWS])
+        self._M = np.ascontiguousarray(np.hstack([Phi[V_ROWS, :n], Gamma[V_ROWS]]))
         self._gain = 1.0 / tau  # dt/tau per step on (innovation / dt)
         self._dt = dt
         self._limit = limit
         self.estimate = np.zeros(3)
-        self._x_prev = np.zeros(n)
-        self._u_prev = np.zeros(Gamma.shape[1])
+        self._z_prev = np.zeros(n + Gamma.shape[1])  # [x(k-1); u(k-1)]: one product
+        self._x_prev = self._z_prev[:n]
+        self._u_prev = self._z_prev[n:]
         self._pred = np.zeros(3)
         self._have_prev = False
 
@@ -65,14 +65,15 @@ class DisturbanceObserver:
         channel, or a handover was blending) and only remembers ``x``.
         """
         if self._have_prev and learn:
-            u = self._u_prev if u_applied_prev is None else u_applied_prev
-            pred = self._pred
-            np.dot(self._Phi_v, self._x_prev, out=pred)
-            pred += self._Gamma_v @ u
-            pred += self._dt * self.estimate
-            d = self.estimate
-            d += self._gain * (x[V_ROWS] - pred)
-            np.clip(d, -self._limit, self._limit, out=d)
+            if u_applied_prev is not None:
+                self._u_prev[:] = u_applied_prev
+            p0, p1, p2 = np.dot(self._M, self._z_prev, out=self._pred).tolist()
+            v0, v1, v2 = x[V_ROWS].tolist()
+            d0, d1, d2 = self.estimate.tolist()
+            k, dt, lim = self._gain, self._dt, self._limit
+            self.estimate[:] = (min(max(d0 + k * (v0 - p0 - dt * d0), -lim), lim),
+                                min(max(d1 + k * (v1 - p1 - dt * d1), -lim), lim),
+                                min(max(d2 + k * (v2 - p2 - dt * d2), -lim), lim))
         self._x_prev[:] = x
         self._have_prev = True
         return self.estimate

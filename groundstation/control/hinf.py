@@ -196,8 +196,8 @@ class HinfController:
         self._u = np.zeros(4)
         self._frame = HeadingFrame()
         lim = limits or CommandLimits.from_stick_params(StickParams.from_quadrotor(p))
-        self._u_lo = np.array([*lim.omega_min, lim.f_z_min])
-        self._u_hi = np.array([*lim.omega_max, lim.f_z_max])
+        self._lo = [*lim.omega_min.tolist(), lim.f_z_min]  # saturation, as Python floats
+        self._hi = [*lim.omega_max.tolist(), lim.f_z_max]
 
     def reset(self) -> None:
         """Zero the integrators (a static state feedback otherwise)."""
@@ -219,10 +219,12 @@ class HinfController:
         xi = z[n:]
         self._integral.update(frame, z, xi)
         u = np.dot(self._K, z, out=self._u)
-        if np.any(u < self._u_lo) or np.any(u > self._u_hi):
+        raw = u.tolist()
+        clipped = [min(max(x, lo), hi) for x, lo, hi in zip(raw, self._lo, self._hi, strict=True)]
+        if clipped != raw:
             self._integral.update(frame, z, xi, undo=True)
-            np.clip(u, self._u_lo, self._u_hi, out=u)
-        return ControlOutput(omega=u[0:3].copy(), f_z=float(u[3]))
+            u[:] = clipped
+        return ControlOutput(omega=u[0:3].copy(), f_z=clipped[3])
 
 
 DEFAULT_GAIN_FILES = {False: "hinf_thesis.npz", True: "hinf_rate_loop.npz"}

@@ -154,8 +154,8 @@ class LqrController:
         self._weight = self.params.mass * self.params.g
         self._cos_tilt = 1.0
         lim = limits or CommandLimits.from_stick_params(StickParams.from_quadrotor(self.params))
-        self._u_lo = np.array([*lim.omega_min, lim.f_z_min])
-        self._u_hi = np.array([*lim.omega_max, lim.f_z_max])
+        self._lo = [*lim.omega_min.tolist(), lim.f_z_min]  # saturation, as Python floats:
+        self._hi = [*lim.omega_max.tolist(), lim.f_z_max]  # cheaper than numpy on 4 values
         g = self.gains
         self._K = np.hstack([g.K_s, g.K_i, g.K_r])
         n_i, n_r = g.K_i.shape[1], g.K_r.shape[1]
@@ -236,17 +236,18 @@ class LqrController:
         u = np.dot(self._K, self._z, out=self._u)
         if obs is not None:
             u[3] -= self.params.mass * obs.estimate[2]
-        saturated = bool(np.any(u < self._u_lo) or np.any(u > self._u_hi))
-        np.clip(u, self._u_lo, self._u_hi, out=u)
-        if saturated:
+        raw = u.tolist()
+        clipped = [min(max(x, lo), hi) for x, lo, hi in zip(raw, self._lo, self._hi, strict=True)]
+        if clipped != raw:
+            u[:] = clipped
             self._integral.update(frame, xs, self._xi, undo=True)
         self._history.propose(u)
         if obs is not None:
             obs.commit(u)  # the linear model's input: the compensation below is not in it
         self._learn = True  # until sent() says otherwise
-        q = estimate.quaternion
-        c = float(q[0] * q[0] - q[1] * q[1] - q[2] * q[2] + q[3] * q[3])
-        self._cos_tilt = c = max(c, 0.5)
+        q0, q1, q2, q3 = estimate.quaternion.tolist()
+        c = max(q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3, 0.5)
+        self._cos_tilt = c
         f_z = float(u[3])
         if self._tilt_comp:
             f_z = (f_z - self._weight * (1.0 - c)) / c
@@ -274,21 +275,19 @@ class LqrController:
             return
         d = self._d
         r = self._r_last
-        if self._have_last:
-            raw = np.array([reference.position[0] - r[0], reference.position[1] - r[1],
-                            reference.position[2] - r[2], wrap_angle(reference.yaw - r[3])])
+        px, py, pz = reference.position.tolist()
+        if self._use_ref_velocity:
+            vx, vy, vz = reference.velocity.tolist()
+            dt = self.dt
+            d[:] = (dt * vx, dt * vy, dt * vz, dt * reference.yaw_rate)
+        elif self._have_last:
+            raw = np.array([px - r[0], py - r[1], pz - r[2], wrap_angle(reference.yaw - r[3])])
             if np.any(np.abs(raw[:3]) > self._max_step):
                 raw[:] = 0.0  # a set-point step is not a velocity
             d *= self._alpha
             d += (1.0 - self._alpha) * raw
-        r[0:3] = reference.position
-        r[3] = reference.yaw
+        r[:] = (px, py, pz, reference.yaw)
         self._have_last = True
-        if self._use_ref_velocity:
-            d[0:3] = self.dt * reference.velocity
-            d[3] = self.dt * reference.yaw_rate
-        hx, hy = self._frame.to_heading(float(d[0]), float(d[1]))
-        xr[4] = -hx
-        xr[5] = -hy
-        xr[6] = -float(d[2])
-        xr[7] = -math.sin(0.5 * float(d[3]))
+        d0, d1, d2, d3 = d.tolist()
+        hx, hy = self._frame.to_heading(d0, d1)
+        xr[4:8] = (-hx, -hy, -d2, -math.sin(0.5 * d3))

@@ -134,8 +134,8 @@ class FeedforwardLqr:
         self._inv_2g = 0.5 / p.g
         self._cos_tilt = 1.0
         lim = limits or CommandLimits.from_stick_params(StickParams.from_quadrotor(p))
-        self._u_lo = np.array([*lim.omega_min, lim.f_z_min])
-        self._u_hi = np.array([*lim.omega_max, lim.f_z_max])
+        self._lo = [*lim.omega_min.tolist(), lim.f_z_min]  # saturation, as Python floats:
+        self._hi = [*lim.omega_max.tolist(), lim.f_z_max]  # cheaper than numpy on 4 values
 
     def reset(self) -> None:
         """Zero the integrators and the input histories."""
@@ -156,21 +156,18 @@ class FeedforwardLqr:
         fill_heading_state(frame, estimate, reference, e)  # also updates the frame
         g2 = self._inv_2g
         # reference tilt, velocity and body rates in the heading frame
-        ax, ay = frame.to_heading(float(reference.acceleration[0]),
-                                  float(reference.acceleration[1]))
-        jx, jy = frame.to_heading(float(reference.jerk[0]), float(reference.jerk[1]))
-        vx, vy = frame.to_heading(float(reference.velocity[0]), float(reference.velocity[1]))
-        e[3] -= ay * g2
-        e[4] += ax * g2
-        e[6] -= vx
-        e[7] -= vy
-        e[8] -= float(reference.velocity[2])
+        a0, a1, _a2 = reference.acceleration.tolist()
+        j0, j1, _j2 = reference.jerk.tolist()
+        v0, v1, v2 = reference.velocity.tolist()
+        ax, ay = frame.to_heading(a0, a1)
+        jx, jy = frame.to_heading(j0, j1)
+        vx, vy = frame.to_heading(v0, v1)
+        _x, _y, _z, q1, q2, _q3, w0, w1, w2 = e[0:9].tolist()
         # body rates that turn the thrust vector as the jerk asks (the heading frame's own
         # turn at r cancels: omega_x = 2 q1_dot - 2 q2 r = j_right / g, likewise omega_y)
-        om = estimate.omega
-        e[9] = float(om[0]) - 2.0 * g2 * jy
-        e[10] = float(om[1]) + 2.0 * g2 * jx
-        e[11] = float(om[2]) - reference.yaw_rate
+        om0, om1, om2 = estimate.omega.tolist()
+        e[3:12] = (q1 - ay * g2, q2 + ax * g2, _q3, w0 - vx, w1 - vy, w2 - v2,
+                   om0 - 2.0 * g2 * jy, om1 + 2.0 * g2 * jx, om2 - reference.yaw_rate)
         n_past = 4 * self.model.past
         e[N_VEHICLE:N_VEHICLE + n_past] = self._history.advance()
         e[N_VEHICLE:N_VEHICLE + n_past] -= self._ff_history.advance()
@@ -178,16 +175,17 @@ class FeedforwardLqr:
         u_ff = self._feedforward(reference if preview is None else preview, reference)
         u = np.dot(self._K, e, out=self._u)
         u += u_ff
-        saturated = bool(np.any(u < self._u_lo) or np.any(u > self._u_hi))
-        np.clip(u, self._u_lo, self._u_hi, out=u)
-        if saturated:
+        raw = u.tolist()
+        clipped = [min(max(x, lo), hi) for x, lo, hi in zip(raw, self._lo, self._hi, strict=True)]
+        if clipped != raw:
+            u[:] = clipped
             self._integral.update(frame, e, self._xi, undo=True)
         self._history.propose(u)
         self._ff_history.propose(u_ff)
-        q = estimate.quaternion
-        c = float(q[0] * q[0] - q[1] * q[1] - q[2] * q[2] + q[3] * q[3])
-        self._cos_tilt = c = max(c, 0.5)
-        f_z = float(u[3])
+        q0, q1, q2, q3 = estimate.quaternion.tolist()
+        c = max(q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3, 0.5)
+        self._cos_tilt = c
+        f_z = clipped[3]
         if self._tilt_comp:
             f_z = (f_z - self._weight * (1.0 - c)) / c
         return ControlOutput(omega=u[0:3].copy(), f_z=f_z)
@@ -205,18 +203,15 @@ class FeedforwardLqr:
         """``u_ff`` (4,) from the preview ``ahead``, turned into the heading frame the
         vehicle will have then (its heading plus the reference's turn until then)."""
         frame = self._frame
-        turn = wrap_angle(ahead.yaw - now.yaw)
-        psi = frame.yaw + turn
+        psi = frame.yaw + wrap_angle(ahead.yaw - now.yaw)
         c, s = math.cos(psi), math.sin(psi)
-        a, j = ahead.acceleration, ahead.jerk
-        jx = c * float(j[0]) + s * float(j[1])
-        jy = -s * float(j[0]) + c * float(j[1])
+        j0, j1, j2 = ahead.jerk.tolist()
+        jx = c * j0 + s * j1
+        jy = -s * j0 + c * j1
         inv_g = 2.0 * self._inv_2g
-        u = self._u_ff
-        u[0] = inv_g * jy
-        u[1] = -inv_g * jx
-        u[2] = ahead.yaw_rate
-        tau = self.model.rate_tau
         p = self.params
-        u[3] = p.mass * (float(a[2]) - tau * float(j[2])) - p.inflow * float(ahead.velocity[2])
+        u = self._u_ff
+        u[:] = (inv_g * jy, -inv_g * jx, ahead.yaw_rate,
+                p.mass * (float(ahead.acceleration[2]) - self.model.rate_tau * j2)
+                - p.inflow * float(ahead.velocity[2]))
         return u

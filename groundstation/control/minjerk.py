@@ -60,7 +60,7 @@ def min_jerk_duration(distance: float, max_speed: float, max_accel: float,
     if d == 0.0:
         return 0.0
     return max(PEAK_RATE * d / max_speed, math.sqrt(PEAK_ACCEL * d / max_accel),
-               (PEAK_JERK * d / max_jerk) ** (1.0 / 3.0))
+               math.pow(PEAK_JERK * d / max_jerk, 1.0 / 3.0))
 
 
 @dataclass(frozen=True, slots=True)
