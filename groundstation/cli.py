@@ -81,9 +81,10 @@ def fly(
     vicon_port: Annotated[int | None, typer.Option(help="Vicon UDP port.")] = None,
     vicon_object: Annotated[str | None, typer.Option(help="Vicon object name.")] = None,
     trajectory: Annotated[str | None, typer.Option(
-        help="hover|step-x|step-y|step-z|square|yz-rectangle|low-hover|figure-eight, "
+        help="hover|step-x|step-y|step-z|square|yz-rectangle|low-hover|figure-eight|"
+             "yaw-turn, "
              "or a waypoint CSV file.")] = None,
-    controller: Annotated[str | None, typer.Option(help="lqr-cv|lqr-cp|pid|hinf")] = None,
+    controller: Annotated[str | None, typer.Option(help="lqr-ff|lqr-cv|lqr-cp|pid|hinf")] = None,
     duration: Annotated[float | None, typer.Option(
         help="Seconds on the trajectory before landing (default: one period).")] = None,
     log_dir: Annotated[Path | None, typer.Option(help="Flight-log directory.")] = None,

@@ -165,7 +165,7 @@ def synthesise_hinf(
 
 
 class HinfController:
-    """Fly a stored H-infinity gain: ``u = F_s (x_s - T r)``, saturated.
+    """Fly a stored H-infinity gain: ``u = F_s (x_s - x_ref) + F_i x_i``, saturated.
 
     gain : a :class:`HinfGain` (e.g. from :func:`load_hinf_gain`); params : the
     vehicle (for the default saturation limits); limits : output saturation.
@@ -176,7 +176,9 @@ class HinfController:
     that decays to zero, so the synthesised ``F_r`` would only follow a fraction
     of a constant reference (about 0.66 for the thesis-model gain). Stability
     depends on ``F_s`` only. As for the LQR, the state is taken relative to the
-    reference in the vehicle's heading frame (:func:`.base.fill_heading_state`).
+    reference in the vehicle's heading frame (:func:`.base.fill_heading_state`),
+    velocity included (``x_ref`` holds the reference's position, heading and velocity;
+    beyond the thesis, so that a ramp does not wind up the integrators).
     """
 
     lead_s = 0.0
@@ -213,6 +215,14 @@ class HinfController:
         z = self._z
         frame = self._frame
         fill_heading_state(frame, estimate, reference, z)
+        # the velocity relative to the reference's (beyond the thesis, which gives the
+        # reference position only): a ramp such as the take-off climb is then followed
+        # without winding the integrators up
+        v0, v1, v2 = reference.velocity.tolist()
+        vx, vy = frame.to_heading(v0, v1)
+        z[6] -= vx
+        z[7] -= vy
+        z[8] -= v2
         n = self._n_s
         if n == 12:
             z[9:12] = estimate.omega

@@ -56,6 +56,7 @@ def _heading_arrows(ax: Any, r: FlightRecord, mask: np.ndarray, n: int = 8,
     pad = length + 0.02
     ax.set(xlim=(r.position[mask, 1].min() - pad, r.position[mask, 1].max() + pad),
            ylim=(r.position[mask, 0].min() - pad, r.position[mask, 0].max() + pad))
+    ax.set_aspect("equal", adjustable="box")  # fixed limits: keep the aspect with the box
 
 
 def figure_eight(records: Records, out: Path) -> list[Path]:
@@ -94,7 +95,9 @@ def figure_eight(records: Records, out: Path) -> list[Path]:
             title="lqr-ff: error")
     err.grid(True, alpha=0.3)
     err.legend(fontsize=8, loc="upper right")
-    fig.suptitle("Figure-eight 1.2 m x 0.6 m, 8 s per lap (0.47 m/s peak), Vicon 10 Hz")
+    speed = np.linalg.norm(np.gradient(r.ref_pos[tr], r.t[tr], axis=0), axis=1)
+    fig.suptitle(f"Figure-eight 1.2 m x 0.6 m, 8 s per lap ({float(np.max(speed)):.2f} m/s "
+                 "peak), Vicon 10 Hz")
     return [save(fig, out / "figure_eight.png")]
 
 
