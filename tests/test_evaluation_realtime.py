@@ -43,7 +43,15 @@ def test_real_time_hover_is_logged_aligned_and_reported(tmp_path: Path) -> None:
     assert record.true_pos is not None
     climb = record.during(State.TAKEOFF) & (-record.true_pos[:, 2] > 0.2)
     err = error_norms(record.est_pos[climb], record.true_pos[climb])
-    assert climb.sum() > 50 and err.max() < 0.01, err.max()
+    # The estimate at a tick is the state when the IMU sample was taken: the DATA frame's
+    # 7 ms on the wire and the reader's stamping delay earlier (more on a loaded machine),
+    # while the truth is taken at the tick. On the climb (up to 0.94 m/s) that age alone
+    # is several mm, so the bound is 4 mm plus 25 ms at the vehicle's speed: a stamp up
+    # to 25 ms late passes, an estimate off by more than that does not. Reached on a quiet
+    # machine: 10.7 mm at 0.94 m/s (allowed 27.5 mm), 1-2 mm in slow parts.
+    speed = np.linalg.norm(np.gradient(record.true_pos, record.t, axis=0), axis=1)[climb]
+    allowed = 0.004 + 0.025 * speed
+    assert climb.sum() > 50 and np.all(err < allowed), float(np.max(err - allowed))
     m = flight_metrics(record, settle_s=scenario.settle_s, duration_s=scenario.duration_s)
     # the same flight in-process (same core, same lab, simulated clock) as the yardstick
     fast = flight_metrics(run_in_process(scenario, base), settle_s=scenario.settle_s,
