@@ -26,6 +26,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 import yaml
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
@@ -45,6 +46,17 @@ SENSOR_BLOCKS = ("status", "gyro", "acc", "pressure", "rc")
 Channel = Literal["pitch", "roll", "yaw", "thrust"]
 SensorBlock = Literal["status", "gyro", "acc", "pressure", "rc"]
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+
+
+def _positive_weights(value: list[float]) -> list[float]:
+    if any(not (w > 0 and math.isfinite(w)) for w in value):
+        raise ValueError("weights must be finite and positive (diagonal of a PD matrix)")
+    return value
+
+
+Weights4 = Annotated[list[float], Field(min_length=4, max_length=4),
+                     AfterValidator(_positive_weights)]
+"""Four diagonal entries of a positive-definite weight matrix (LQR Q_e, R)."""
 PositiveFloat = Annotated[float, Field(gt=0)]
 NonNegFloat = Annotated[float, Field(ge=0)]
 
@@ -280,11 +292,9 @@ class EstimatorConfig(_Model):
 class LqrConfig(_Model):
     """LQR with a reference model (thesis Ch. 9). Weights on the error e = r - y."""
 
-    q_error: list[float] = Field(default_factory=lambda: [8.0, 8.0, 20.0, 2.0],
-                                 min_length=4, max_length=4)
+    q_error: Weights4 = Field(default_factory=lambda: [8.0, 8.0, 20.0, 2.0])
     # Q_e on [x, y, z, q3] errors (eq. 9.18) [1/m^2, -]; tuned for ~0.2 Hz x/y as Ch. 11.2
-    r_input: list[float] = Field(default_factory=lambda: [4.0, 4.0, 4.0, 2.0],
-                                 min_length=4, max_length=4)
+    r_input: Weights4 = Field(default_factory=lambda: [4.0, 4.0, 4.0, 2.0])
     # R on [omega_x, omega_y, omega_z, F_z] [1/(rad/s)^2, 1/N^2]: the body-rate form of
     # eq. 4.31's input (sticks = omega / K), tuned
     q_integral: list[float] | None = None
@@ -305,13 +315,6 @@ class LqrConfig(_Model):
     # rate-loop: design on the hover model with the rate-loop lag and the command delay
     # (vehicle section), as the thesis concludes it must (Ch. 10.3, 12); thesis: its
     # ideal-rate-loop model (Ch. 9)
-
-    @field_validator("q_error", "r_input")
-    @classmethod
-    def _positive_weights(cls, value: list[float]) -> list[float]:
-        if any(not (w > 0 and math.isfinite(w)) for w in value):
-            raise ValueError("weights must be finite and positive (diagonal of a PD matrix)")
-        return value
 
 
 class PidConfig(_Model):
@@ -360,12 +363,10 @@ class LqrFfConfig(_Model):
     """LQR with the feed-forward reference model (beyond the thesis, control/lqr_ff.py),
     designed on the vehicle with its rate loop and command delay. Weights on e = x - x_ref."""
 
-    q_error: list[float] = Field(default_factory=lambda: [100.0, 100.0, 100.0, 20.0],
-                                 min_length=4, max_length=4)
+    q_error: Weights4 = Field(default_factory=lambda: [100.0, 100.0, 100.0, 20.0])
     # Q_e on [x, y, z, q3] errors [1/m^2, -]: ~0.8 Hz horizontal bandwidth; tuned for the
     # worst case of `gs eval --perturb` (rate gains +-30 %, tau +-30 %, delay 5-30 ms)
-    r_input: list[float] = Field(default_factory=lambda: [1.0, 1.0, 1.0, 0.5],
-                                 min_length=4, max_length=4)
+    r_input: Weights4 = Field(default_factory=lambda: [1.0, 1.0, 1.0, 0.5])
     # R on [omega_x, omega_y, omega_z, F_z] [1/(rad/s)^2, 1/N^2], tuned with q_error
     q_integral: list[float] = Field(default_factory=lambda: [20.0, 20.0, 60.0, 2.0],
                                     min_length=4, max_length=4)
@@ -373,13 +374,6 @@ class LqrFfConfig(_Model):
     # thrust-map error, a wrong mass or battery droop (issue 13); 0 turns one off. z is
     # weighted 3x: with mass and thrust map 15 % off, 20 left a 2 cm take-off tail in TRACK
     integral_limit: PositiveFloat = 2.0  # anti-windup clamp on each integrated error [m s]
-
-    @field_validator("q_error", "r_input")
-    @classmethod
-    def _positive_weights(cls, value: list[float]) -> list[float]:
-        if any(not (w > 0 and math.isfinite(w)) for w in value):
-            raise ValueError("weights must be finite and positive (diagonal of a PD matrix)")
-        return value
 
     @field_validator("q_integral")
     @classmethod

@@ -38,6 +38,7 @@ from groundstation.control.hinf_design import (
     standard_problem,
     uncertainty_vertices,
 )
+from groundstation.control.lqr_design import saturate
 from groundstation.control.sticks import CommandLimits, StickParams
 from groundstation.errors import ControlError
 from groundstation.model import QuadrotorParams
@@ -229,12 +230,9 @@ class HinfController:
         xi = z[n:]
         self._integral.update(frame, z, xi)
         u = np.dot(self._K, z, out=self._u)
-        raw = u.tolist()
-        clipped = [min(max(x, lo), hi) for x, lo, hi in zip(raw, self._lo, self._hi, strict=True)]
-        if clipped != raw:
+        if saturate(u, self._lo, self._hi) is not None:
             self._integral.update(frame, z, xi, undo=True)
-            u[:] = clipped
-        return ControlOutput(omega=u[0:3].copy(), f_z=clipped[3])
+        return ControlOutput(omega=u[0:3].copy(), f_z=float(u[3]))
 
 
 DEFAULT_GAIN_FILES = {False: "hinf_thesis.npz", True: "hinf_rate_loop.npz"}

@@ -46,7 +46,13 @@ from groundstation.control.base import (
     wrap_angle,
 )
 from groundstation.control.disturbance import DisturbanceObserver
-from groundstation.control.lqr_design import ReferenceKind, TrackingGains, design_tracking_lqr
+from groundstation.control.lqr_design import (
+    ReferenceKind,
+    TrackingGains,
+    design_tracking_lqr,
+    saturate,
+    weight_matrix,
+)
 from groundstation.control.sticks import CommandLimits, StickParams
 from groundstation.errors import ControlError
 from groundstation.model import QuadrotorParams, hover_model_reduced
@@ -62,14 +68,6 @@ DEFAULT_DISTURBANCE_TAU = 1.0
 H_OUTPUTS = OUTPUT_ROWS
 """Rows of the reduced state that are the controlled outputs x, y, z, q3 (eq. 9.15)."""
 
-
-def _diag(values: Sequence[float], n: int, name: str) -> np.ndarray:
-    arr = np.asarray(values, dtype=float)
-    if arr.shape == (n,):
-        return np.diag(arr)
-    if arr.shape == (n, n):
-        return arr
-    raise ControlError(f"{name} must be {n} diagonal entries or {n}x{n}, found shape {arr.shape}")
 
 
 class LqrController:
@@ -194,7 +192,8 @@ class LqrController:
             integrated = [k for k in range(4) if qi[k] > 0.0]
             Q_i = np.diag(qi[integrated]) if integrated else None
         gains = design_tracking_lqr(
-            Phi, Gamma, H_s, _diag(q_error, 4, "q_error"), _diag(r_input, 4, "r_input"),
+            Phi, Gamma, H_s, weight_matrix(q_error, 4, "q_error"),
+            weight_matrix(r_input, 4, "r_input"),
             reference=self.reference_model, dt=self.dt, Q_i=Q_i, integrate=integrated,
         )
         return gains, integrated
@@ -236,10 +235,7 @@ class LqrController:
         u = np.dot(self._K, self._z, out=self._u)
         if obs is not None:
             u[3] -= self.params.mass * obs.estimate[2]
-        raw = u.tolist()
-        clipped = [min(max(x, lo), hi) for x, lo, hi in zip(raw, self._lo, self._hi, strict=True)]
-        if clipped != raw:
-            u[:] = clipped
+        if saturate(u, self._lo, self._hi) is not None:
             self._integral.update(frame, xs, self._xi, undo=True)
         self._history.propose(u)
         if obs is not None:

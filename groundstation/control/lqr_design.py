@@ -57,6 +57,28 @@ def check_shape(name: str, matrix: FloatArray, shape: tuple[int, int]) -> FloatA
     return arr
 
 
+def weight_matrix(values: Sequence[float], n: int, name: str) -> FloatArray:
+    """An n x n weight given as its n diagonal entries or in full; ControlError otherwise."""
+    arr = np.asarray(values, dtype=float)
+    if arr.shape == (n,):
+        return np.diag(arr)
+    if arr.shape == (n, n):
+        return arr
+    raise ControlError(f"{name} must be {n} diagonal entries or {n}x{n}, found shape {arr.shape}")
+
+
+def saturate(u: FloatArray, lo: Sequence[float], hi: Sequence[float]) -> list[float] | None:
+    """Clip ``u`` (4,) in place to ``[lo, hi]``; returns the clipped values as Python floats
+    if any was out of range, else None (scalar Python: numpy's call overhead on 4 values
+    costs more than the arithmetic)."""
+    raw = u.tolist()
+    clipped = [min(max(x, a), b) for x, a, b in zip(raw, lo, hi, strict=True)]
+    if clipped == raw:
+        return None
+    u[:] = clipped
+    return clipped
+
+
 def check_weight(name: str, matrix: FloatArray, n: int, *, definite: bool) -> FloatArray:
     """A symmetric positive (semi-)definite n x n weight, or ControlError."""
     arr = check_shape(name, matrix, (n, n))

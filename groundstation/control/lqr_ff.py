@@ -48,7 +48,7 @@ from groundstation.control.base import (
     fill_heading_state,
     wrap_angle,
 )
-from groundstation.control.lqr_design import design_tracking_lqr
+from groundstation.control.lqr_design import design_tracking_lqr, saturate, weight_matrix
 from groundstation.control.sticks import CommandLimits, StickParams
 from groundstation.errors import ControlError
 from groundstation.model import QuadrotorParams
@@ -62,14 +62,6 @@ DEFAULT_R_INPUT = (1.0, 1.0, 1.0, 0.5)
 DEFAULT_Q_INTEGRAL = (20.0, 20.0, 60.0, 2.0)
 """Weights on the integrated [x, y, z, q3] errors [1/(m s)^2, ..., 1/s^2]."""
 
-
-def _diag(values: Sequence[float], n: int, name: str) -> FloatArray:
-    arr = np.asarray(values, dtype=float)
-    if arr.shape == (n,):
-        return np.diag(arr)
-    if arr.shape == (n, n):
-        return arr
-    raise ControlError(f"{name} must be {n} diagonal entries or {n}x{n}, found shape {arr.shape}")
 
 
 class FeedforwardLqr:
@@ -112,7 +104,7 @@ class FeedforwardLqr:
         integrated = [k for k in range(4) if qi[k] > 0.0]
         gains = design_tracking_lqr(
             self.model.Phi, self.model.Gamma, self.model.output_matrix(),
-            _diag(q_error, 4, "q_error"), _diag(r_input, 4, "r_input"),
+            weight_matrix(q_error, 4, "q_error"), weight_matrix(r_input, 4, "r_input"),
             reference="position", dt=period,
             Q_i=np.diag(qi[integrated]) if integrated else None, integrate=integrated,
         )
@@ -175,17 +167,14 @@ class FeedforwardLqr:
         u_ff = self._feedforward(reference if preview is None else preview, reference)
         u = np.dot(self._K, e, out=self._u)
         u += u_ff
-        raw = u.tolist()
-        clipped = [min(max(x, lo), hi) for x, lo, hi in zip(raw, self._lo, self._hi, strict=True)]
-        if clipped != raw:
-            u[:] = clipped
+        if saturate(u, self._lo, self._hi) is not None:
             self._integral.update(frame, e, self._xi, undo=True)
         self._history.propose(u)
         self._ff_history.propose(u_ff)
         q0, q1, q2, q3 = estimate.quaternion.tolist()
         c = max(q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3, 0.5)
         self._cos_tilt = c
-        f_z = clipped[3]
+        f_z = float(u[3])
         if self._tilt_comp:
             f_z = (f_z - self._weight * (1.0 - c)) / c
         return ControlOutput(omega=u[0:3].copy(), f_z=f_z)
