@@ -3,18 +3,26 @@
 Each command is a thin shell: parse options, load the configuration, call the
 package, translate :class:`~groundstation.errors.GroundStationError` into a
 one-line message and a non-zero exit code. Exit codes: 0 success, 1 runtime
-failure, 2 bad configuration or usage.
+failure, 2 bad configuration or usage; `gs fly` adds 3 (could not start) and 4
+(stopped on request), see its help.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
 from groundstation import __version__
-from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.config import (
+    GroundStationConfig,
+    apply_overrides,
+    check_files,
+    dump_config,
+    load_config,
+)
 from groundstation.errors import ConfigError, GroundStationError, IdentificationError
 from groundstation.logs import configure_logging
 
@@ -38,12 +46,20 @@ def _fail(message: str, code: int) -> typer.Exit:
     return typer.Exit(code)
 
 
+def _checked_config(path: Path, overrides: dict[str, Any] | None = None) -> GroundStationConfig:
+    """The configuration a command runs with: the file, the CLI overrides, and the files it
+    names (waypoints, gain, CURVE keys) checked. ConfigError naming each problem."""
+    config = load_config(path)
+    if overrides:
+        config = apply_overrides(config, overrides)
+    check_files(config, str(path))
+    return config
+
+
 def load(path: Path, overrides: dict[str, Any] | None = None) -> GroundStationConfig:
     """Load the configuration and apply CLI overrides; exit 2 with the errors if invalid."""
     try:
-        config = load_config(path)
-        if overrides:
-            config = apply_overrides(config, overrides)
+        config = _checked_config(path, overrides)
     except ConfigError as exc:
         raise _fail(str(exc), 2) from exc
     configure_logging(config.logging.level, config.logging.format)
@@ -60,16 +76,17 @@ def version() -> None:
 def check_config(file: Annotated[Path, typer.Argument(help="YAML configuration file.")]) -> None:
     """Validate a configuration file and print it with every default filled in.
 
-    The trajectory is built, shaped and checked as `gs fly` would (limits, volume);
-    exit code 2 if the file or its trajectory is refused.
+    Runs the checks `gs fly` runs before connecting to anything: the file, the files it
+    names (waypoint CSV, H-infinity gain, CURVE keys), and the flight built from it
+    (estimator, controller, the trajectory shaped and checked against the limits and
+    the volume). Exit code 2 if any of them is refused.
     """
-    from groundstation.errors import TrajectoryError
-    from groundstation.loop.assemble import trajectory_for_flight
+    from groundstation.loop.core import FlightCore
 
     try:
-        config = load_config(file)
-        trajectory_for_flight(config)
-    except (ConfigError, TrajectoryError) as exc:
+        config = _checked_config(file)
+        FlightCore(config)
+    except (GroundStationError, ValueError, ArithmeticError) as exc:
         raise _fail(str(exc), 2) from exc
     typer.echo(dump_config(config), nl=False)
 
@@ -93,8 +110,20 @@ def fly(
 ) -> None:
     """Fly: preflight, take off, track the trajectory, land, hand back to the pilot.
 
-    Exit code 0 after a normal landing and handover (or a requested stop), 1 on
-    any other end (failsafe, pilot takeover, link loss, failed preflight).
+    SIGINT/SIGTERM lands; a second one at least safety.second_signal_after_s
+    (0.5 s) after the first hands back at once.
+
+    Exit codes:
+    0  mission completed: landed and handed back, no failsafe
+    1  failsafe or abort: failsafe landing or handback (Vicon lost, volume,
+       tilt, low battery, take-off timeout), pilot takeover, the vehicle's
+       watchdog expired in the air, link lost, preflight failed, internal error
+    2  configuration or usage error, or a trajectory refused before flight
+    3  could not start: serial port absent or in use by another flight, Vicon
+       or telemetry port taken, log directory not writable (nothing was sent
+       to the vehicle)
+    4  stopped on request (SIGINT/SIGTERM): landed, or handed back at a second
+       request
     """
     overrides: dict[str, Any] = {
         "serial.port": serial_port, "vicon.port": vicon_port, "vicon.object_name": vicon_object,
@@ -244,25 +273,45 @@ def channels(
     endpoint: Annotated[str, typer.Option(help="The daemon's telemetry.control_endpoint.")] =
         "tcp://127.0.0.1:5557",
     timeout: Annotated[float, typer.Option(help="Seconds to wait for the reply.")] = 2.0,
+    server_key: Annotated[Path | None, typer.Option(
+        help="The daemon's public key (server.key), when it authenticates clients "
+             "(telemetry.control_server_key).")] = None,
+    client_key: Annotated[Path | None, typer.Option(
+        help="This client's key pair (a .key_secret file) whose public half is in the "
+             "daemon's telemetry.control_client_keys.")] = None,
 ) -> None:
     """Hand channels between the controller and the pilot while flying (bumpless).
 
     Example, tuning altitude: `gs channels thrust` (the pilot flies attitude and
     yaw), then `gs channels pitch roll yaw thrust` to hand everything back to the
-    controller.
+    controller. A daemon that authenticates its clients (CURVE) needs `--server-key`
+    and `--client-key`.
     """
     from groundstation.telemetry.control import send_request
+    from groundstation.telemetry.curve import CurveClient, load_client_keys
 
+    if not (math.isfinite(timeout) and timeout > 0):
+        raise _fail(f"--timeout {timeout:g}: must be a positive number of seconds", 2)
+    if (server_key is None) != (client_key is None):
+        raise _fail("--server-key and --client-key go together (CURVE needs both)", 2)
+    curve: CurveClient | None = None
+    try:
+        if server_key is not None and client_key is not None:
+            curve = load_client_keys(client_key, server_key)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 2) from exc
     request: dict[str, Any] = {"request": "channels"}
     if auto:
         request["auto"] = auto
     try:
-        reply = send_request(endpoint, request, timeout)
+        reply = send_request(endpoint, request, timeout, curve=curve)
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
     if not reply.get("ok"):
         raise _fail(str(reply.get("error", reply)), 1)
-    typer.echo(f"automatic: {' '.join(reply['auto'])}  (state {reply['state']})")
+    now = reply.get("auto")
+    typer.echo(f"automatic: {' '.join(map(str, now)) if isinstance(now, list) else now}  "
+               f"(state {reply.get('state')})")
 
 
 @identify_app.command("thrust")

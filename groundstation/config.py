@@ -5,7 +5,9 @@ A configuration is one YAML file (``config/lab.yaml`` for the real lab,
 validates it; any problem raises :class:`~groundstation.errors.ConfigError`
 whose message names the field path, the offending value and the reason, one
 line per problem. Unknown keys are errors (a typo must not silently fall back
-to a default).
+to a default), and so are a key given twice, a number that is a boolean, a
+fraction where an integer is meant, and any infinite or NaN number (see
+:class:`_Model`). :func:`check_files` checks the files a configuration names.
 
 Every numeric default names its source in a comment: a thesis equation or
 table ("eq. 3.7", "Table 6.2"), the spec, or the reason it was chosen where the
@@ -19,7 +21,10 @@ checked exactly like the file.
 from __future__ import annotations
 
 import copy
+import ipaddress
 import math
+import os
+import re
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -30,10 +35,13 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    GetCoreSchemaHandler,
     ValidationError,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
+from pydantic_core import CoreSchema
 
 from groundstation.errors import ConfigError
 
@@ -61,10 +69,39 @@ PositiveFloat = Annotated[float, Field(gt=0)]
 NonNegFloat = Annotated[float, Field(ge=0)]
 
 
-class _Model(BaseModel):
-    """Base: unknown keys are errors, instances are immutable."""
+def _strict_scalars(schema: Any) -> None:
+    """Mark every int, float and bool in a pydantic core schema strict, in place."""
+    if isinstance(schema, dict):
+        if schema.get("type") in ("int", "float", "bool"):
+            schema["strict"] = True
+        for value in schema.values():
+            _strict_scalars(value)
+    elif isinstance(schema, list):
+        for value in schema:
+            _strict_scalars(value)
 
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+class _Model(BaseModel):
+    """Base: unknown keys are errors, instances are immutable, numbers are numbers.
+
+    Every number must be finite (``allow_inf_nan=False``: ``.inf`` is no time, rate or
+    length), and numbers and booleans are strict, each in every model (issue 14): no
+    ``true`` for a number (``vicon.port: true`` would be port 1), no ``1e30`` for an
+    integer (``serial.baud``), no string for a number, no ``0``/``1`` for a boolean. An
+    int is a float. The rest stays lax, as YAML needs it: a string is a path, a list a
+    tuple. (pydantic's model-wide ``strict=True`` would refuse those, and validates
+    defaults such as ``Path("flightlogs")`` against the JSON rules.)
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True,
+                              allow_inf_nan=False)
+
+    @classmethod
+    def __get_pydantic_core_schema__(cls, source: type[BaseModel],
+                                     handler: GetCoreSchemaHandler, /) -> CoreSchema:
+        schema = handler(source)
+        _strict_scalars(schema)
+        return schema
 
 
 def _matrix(value: list[float] | list[list[float]], n: int, name: str) -> np.ndarray:
@@ -108,7 +145,8 @@ class SerialConfig(_Model):
     """The serial link to the X-3D (``spec/x3d-serial-protocol.md``)."""
 
     port: str = "/dev/ttyUSB0"  # the lab's XBee adapter; a pty path or pyserial URL also works
-    baud: int = Field(57600, gt=0)  # spec section 1 default (design choice)
+    baud: int = Field(57600, gt=0, le=4_000_000)
+    # spec section 1 default (design choice); at most the 4 Mbaud of the fastest USB UARTs
     crc_profile: Literal["asctec", "kermit", "mcrf4xx"] = "asctec"  # spec section 2
     sensors: list[SensorBlock] = Field(default_factory=_default_sensors)
     # STATUS+GYRO+ACC+RC = 41 B/frame, 71% of 57600 baud at 100 Hz (spec section 6)
@@ -161,6 +199,10 @@ class RotationConfig(_Model):
         return np.asarray(Rotation.from_euler("XYZ", self.euler_xyz_deg, degrees=True).as_matrix())
 
 
+Box = tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
+"""An axis-aligned box ``((x_min, x_max), (y_min, y_max), (z_min, z_max))``, NED [m]."""
+
+
 class ViconConfig(_Model):
     """The Vicon UDP object stream (``spec/vicon-udp.md``)."""
 
@@ -169,19 +211,37 @@ class ViconConfig(_Model):
     object_name: str = Field("X3D", min_length=1, max_length=23)  # spec: at most 23 characters
     world_to_ned: RotationConfig = RotationConfig()  # Vicon z-up -> NED: 180 deg about x (spec)
     body_to_object: RotationConfig = RotationConfig()  # FRD body -> object frame: 180 deg about x
-    latency_s: NonNegFloat = 0.005  # spec: "a few ms"; Tracker + network latency
+    latency_s: float = Field(0.005, ge=0, le=0.5)  # spec: "a few ms"; Tracker + network latency
     expected_rate_hz: PositiveFloat = 100.0  # thesis lab streamed 100 Hz (App. B)
     min_rate_hz: PositiveFloat = 8.0  # warn below: the thesis flew at 10 Hz (Ch. 11.1)
     max_speed_m_s: PositiveFloat = 5.0  # outlier gate; spec "a few m/s"
     max_rotation_rate_rad_s: PositiveFloat = 30.0  # outlier gate; spec "tens of rad/s"
     restart_silence_s: PositiveFloat = 1.0  # a longer silence is a Tracker restart (spec)
     restart_backjump_frames: int = Field(1000, gt=0)  # a larger backward jump is a restart
+    plausibility_margin_m: NonNegFloat = 0.5
+    # [m] a pose further than this outside safety.volume_x/y/z is refused as impossible
+    # (issue 14). The supervisor lands at the volume's edge; braking from the fastest
+    # reference (safety.max_speed_m_s, 1.5 m/s) at the 35 deg tilt limit takes 0.16 m,
+    # and the cameras see a little beyond the volume (Table B.1): 0.5 m covers both
+    reanchor_poses: int = Field(3, ge=2)
+    # consistent poses in a row before a pose stream is believed: at start-up, after a
+    # gap, for a new stream, and before the estimator re-anchors on poses it gated (issue
+    # 14: never one pose). 3: 20 ms late at 100 Hz, 0.2 s at 10 Hz; one stray pose is not
+    # enough, and a chance agreement of three is as unlikely as the gate allows
 
     @model_validator(mode="after")
     def _rates(self) -> ViconConfig:
         if self.min_rate_hz > self.expected_rate_hz:
             raise ValueError("min_rate_hz must not exceed expected_rate_hz")
         return self
+
+    def plausible_volume(self, safety: SafetyConfig) -> Box:
+        """Where a pose can be: ``safety.volume_x/y/z`` (NED [m]) grown by
+        ``plausibility_margin_m`` on every side, as ``((x_min, x_max), (y_min, y_max),
+        (z_min, z_max))``."""
+        m = self.plausibility_margin_m
+        x, y, z = safety.volume_x, safety.volume_y, safety.volume_z
+        return ((x[0] - m, x[1] + m), (y[0] - m, y[1] + m), (z[0] - m, z[1] + m))
 
 
 # --------------------------------------------------------------------------- vehicle
@@ -449,14 +509,17 @@ class SafetyConfig(_Model):
     handback_tilt_deg: PositiveFloat = 60.0
     # a landing that tilts this far has lost the attitude (the controller that tripped
     # max_tilt_deg is still flying): hand back to the pilot at once
-    vicon_loss_hold_s: PositiveFloat = 0.5  # hold on the IMU estimate after this (PX4 figure)
-    vicon_loss_land_s: PositiveFloat = 2.0  # land if Vicon has not returned after this
-    link_loss_s: PositiveFloat = 0.3  # no DATA this long = link lost
+    # The failsafe times are bounded: a finite but huge value would switch the failsafe off.
+    vicon_loss_hold_s: float = Field(0.5, gt=0, le=5.0)
+    # hold on the IMU estimate after this (PX4 figure); at most 5 s: the IMU alone drifts
+    vicon_loss_land_s: float = Field(2.0, gt=0, le=30.0)  # land if Vicon has not returned
+    link_loss_s: float = Field(0.3, gt=0, le=2.0)
+    # no DATA this long = link lost; at most 2 s (the vehicle's own watchdog is 100 ms)
     takeoff_height_m: PositiveFloat = 1.0  # Ch. 11: flights at 1 m
     takeoff_speed_m_s: PositiveFloat = 0.5  # climb rate for take-off, tuned
     land_speed_m_s: PositiveFloat = 0.3  # descent rate when landing, tuned
-    preflight_timeout_s: PositiveFloat = 10.0  # give up if checks do not pass in this time
-    takeoff_timeout_s: PositiveFloat = 20.0
+    preflight_timeout_s: float = Field(10.0, gt=0, le=600.0)  # give up if checks do not pass
+    takeoff_timeout_s: float = Field(20.0, gt=0, le=300.0)
     # land if the take-off has not reached the trajectory's start in this time (a 1 m
     # climb at 0.5 m/s takes ~4 s after the 1 s handover blend); tuned
     trajectory_tilt_deg: PositiveFloat = 20.0
@@ -467,6 +530,18 @@ class SafetyConfig(_Model):
     # a reference must stay this far inside volume_x/y/z (tracking error, braking room)
     gravity_check_deg: PositiveFloat = 10.0  # accel gravity vs Vicon attitude agreement
     on_signal: Literal["land", "handback"] = "land"  # what SIGINT/SIGTERM does
+    second_signal_after_s: float = Field(0.5, ge=0, le=10.0)
+    # a second SIGINT/SIGTERM hands back at once only this long after the first [s];
+    # closer ones are the same request: GNU `timeout` signals the process and then its
+    # group within ~1 ms (issue 14), and a person pressing Ctrl-C twice on purpose takes
+    # longer than half a second
+    battery_land_v: PositiveFloat | None = 10.5
+    # land when the battery the X-3D reports (STATUS) stays below this [V]; 10.5 V is a
+    # 3S LiPo at 3.5 V a cell, ArduPilot's copter default (BATT_LOW_VOLT); also refuses a
+    # take-off. null: no battery failsafe (a vehicle without the STATUS block)
+    battery_grace_s: float = Field(10.0, gt=0, le=120.0)
+    # ... for this long without a sample above it [s]: a voltage sag under load is not an
+    # empty battery (ArduPilot's BATT_LOW_TIMER default, 10 s)
 
     @field_validator("volume_x", "volume_y", "volume_z")
     @classmethod
@@ -485,14 +560,67 @@ class SafetyConfig(_Model):
 
 
 # --------------------------------------------------------------------------- telemetry, logging
+def local_endpoint(endpoint: str) -> bool:
+    """Whether a ZeroMQ bind endpoint reaches only this machine: TCP on a loopback address
+    (127.0.0.0/8, ``::1``, ``localhost``, the ``lo`` interface), IPC or in-process.
+    ``tcp://*:5557``, ``tcp://0.0.0.0:5557``, another address or an interface name are not."""
+    transport, sep, address = endpoint.partition("://")
+    if not sep:
+        return False
+    if transport in ("ipc", "inproc"):
+        return True
+    if transport != "tcp":
+        return False
+    host = address.rpartition(":")[0].removeprefix("[").removesuffix("]")
+    if host in ("localhost", "lo"):
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # "*", an interface or a host name
+        return False
+
+
 class TelemetryConfig(_Model):
-    """The pyzmq PUB socket."""
+    """The pyzmq PUB socket, and the control socket ``gs channels`` talks to.
+
+    The control socket changes what flies, so it binds to loopback unless it
+    authenticates its clients with CURVE (:mod:`groundstation.telemetry.curve`):
+    ``control_server_key`` and ``control_client_keys`` together turn CURVE on, and an
+    endpoint beyond loopback is refused without them.
+    """
 
     enabled: bool = True
     endpoint: str = "tcp://127.0.0.1:5556"  # loopback by default; bind to * to serve the lab
     rate_hz: float = Field(20.0, gt=0, le=100.0)  # enough for a live view, light on the loop
+    # (the two key fields come before control_endpoint so its check can see them)
+    control_server_key: Path | None = None
+    # the daemon's CURVE key pair: a `.key_secret` file of zmq.auth.create_certificates
+    control_client_keys: Path | None = None
+    # directory of the public keys (`*.key`) of the clients allowed to connect
     control_endpoint: str | None = "tcp://127.0.0.1:5557"
     # REP socket for run-time requests (`gs channels`); loopback only by default, null disables
+
+    @field_validator("control_client_keys")
+    @classmethod
+    def _keys_in_pairs(cls, value: Path | None, info: ValidationInfo) -> Path | None:
+        if (value is None) != (info.data.get("control_server_key") is None):
+            raise ValueError("control_server_key and control_client_keys go together: "
+                             "set both to authenticate clients with CURVE, or neither")
+        return value
+
+    @field_validator("control_endpoint")
+    @classmethod
+    def _control_bind(cls, value: str | None, info: ValidationInfo) -> str | None:
+        if value is None:
+            return value
+        if value.partition("://")[0] not in ("tcp", "ipc", "inproc") or "://" not in value:
+            raise ValueError("must be a ZeroMQ endpoint: tcp://HOST:PORT, ipc://PATH or "
+                             "inproc://NAME")
+        if not local_endpoint(value) and info.data.get("control_server_key") is None:
+            raise ValueError("reaches beyond loopback without authentication: set "
+                             "telemetry.control_server_key and telemetry.control_client_keys "
+                             "(CURVE), or bind tcp://127.0.0.1:PORT")
+        return value
 
 
 class LoggingConfig(_Model):
@@ -511,6 +639,11 @@ class RealtimeConfig(_Model):
     # states (measured: 3-6x cheaper ticks on a VM). null leaves the idle states alone
     switch_interval_ms: float = Field(0.5, gt=0.0, le=5.0)
     # GIL switch interval while flying: the longest a reader thread can delay a tick
+    paced_gc: bool = True
+    # freeze the start-up objects and run full garbage collections only right after a
+    # COMMAND went out (realtime.CollectorPacer): the interpreter's own full collection
+    # walked all ~93,000 objects in ~64 ms and the vehicle's 100 ms watchdog expired in
+    # the air (issue 14). false: the interpreter's own collector
 
 
 # --------------------------------------------------------------------------- virtual lab
@@ -597,23 +730,113 @@ class GroundStationConfig(_Model):
 
 
 # --------------------------------------------------------------------------- loading
+MAX_FILE_BYTES = 1 << 20
+"""Largest configuration file read [bytes]; the shipped ones are a few KiB."""
+
+MAX_YAML_VALUES = 100_000
+"""Most values a file may expand to through YAML aliases (a "billion laughs" file would
+otherwise take the validator and the error messages exponential time)."""
+
+_YAML12_EXPONENT_FLOAT = re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$")
+
+
+class _Loader(yaml.SafeLoader):
+    """PyYAML's safe loader, reading ``1e-3`` and ``1e30`` as numbers (YAML 1.2; PyYAML
+    follows YAML 1.1 and reads them as strings, which strict numbers would refuse)."""
+
+
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float", _YAML12_EXPONENT_FLOAT,
+                              list("-+0123456789"))
+
+
+def _check_keys(root: yaml.Node, source: str) -> None:
+    """Refuse a mapping key given twice (YAML would keep the last silently) and a file
+    that expands past :data:`MAX_YAML_VALUES` values. Walks aliases as expanded."""
+    budget = MAX_YAML_VALUES
+    stack: list[tuple[yaml.Node, str]] = [(root, "")]
+    while stack:
+        node, path = stack.pop()
+        budget -= 1
+        if budget < 0:
+            raise ConfigError(f"{source}: expands to more than {MAX_YAML_VALUES} values "
+                              "(through YAML aliases): not a configuration")
+        if isinstance(node, yaml.SequenceNode):
+            stack += [(item, f"{path}.{i}" if path else str(i))
+                      for i, item in enumerate(node.value)]
+        elif isinstance(node, yaml.MappingNode):
+            first: dict[str, int] = {}
+            for key, value in node.value:
+                name = key.value if isinstance(key, yaml.ScalarNode) else "<complex key>"
+                line = key.start_mark.line + 1
+                here = f"{path}.{name}" if path else name
+                if key.tag != "tag:yaml.org,2002:merge" and isinstance(key, yaml.ScalarNode):
+                    if name in first:
+                        reason = (f"duplicate key (first at line {first[name]}; YAML would keep "
+                                  "only the last)")
+                        raise ConfigError(f"{source}:{line}: {here}: {reason}",
+                                          [(here, name, reason)])
+                    first[name] = line
+                stack.append((value, here))
+
+
+def _parse_yaml(raw: bytes, source: str) -> Any:
+    """The YAML document in ``raw``; ConfigError (one line) for anything that is not one
+    UTF-8 YAML document without repeated keys."""
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise ConfigError(f"{source}:{line}: not UTF-8 text (byte 0x{raw[exc.start]:02x}): "
+                          "save the file as UTF-8") from None
+    loader = _Loader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _check_keys(node, source)
+        return loader.construct_document(node)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark else source
+        why = ", ".join(part for part in (exc.context, exc.problem) if part)
+        raise ConfigError(f"{where}: not valid YAML: {why}") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{source}: not valid YAML: {exc}") from None
+    except RecursionError:
+        raise ConfigError(f"{source}: not valid YAML: nested too deeply") from None
+    finally:
+        loader.dispose()
+
+
+def _clip(value: object, chars: int = 1000) -> str:
+    text = repr(value)
+    return text if len(text) <= chars else text[:chars - 3] + "..."
+
+
 def _problems(exc: ValidationError) -> list[tuple[str, object, str]]:
     """One (field path, value, reason) per pydantic error."""
     out = []
     for err in exc.errors(include_url=False):
         path = ".".join(str(p) for p in err["loc"]) or "<root>"
-        reason = err["msg"]
+        reason = err["msg"].removeprefix("Value error, ")
+        value = err.get("input")
         if err["type"] == "extra_forbidden":
             reason = "unknown key"
         elif err["type"] == "missing":
             reason = "required field is missing"
-        out.append((path, err.get("input"), reason))
+        elif err["type"] in ("int_type", "float_type") and isinstance(value, bool):
+            reason = f"{reason}, not a boolean"
+        elif err["type"] == "int_type" and isinstance(value, float):
+            reason = f"{reason}, not a fraction or exponent (whole numbers only)"
+        elif err["type"] == "finite_number":
+            reason = f"{reason}: a time, rate, length or gain is never infinite or NaN"
+        out.append((path, value, reason))
     return out
 
 
 def _raise(problems: list[tuple[str, object, str]], source: str) -> None:
     lines = [f"{source}: {len(problems)} configuration error(s)"]
-    lines += [f"  {path}: {value!r}: {reason}" for path, value, reason in problems]
+    lines += [f"  {path}: {_clip(value)}: {reason}" for path, value, reason in problems]
     raise ConfigError("\n".join(lines), problems)
 
 
@@ -631,18 +854,64 @@ def validate_config(data: dict[str, Any], source: str = "<config>") -> GroundSta
 def load_config(path: str | Path) -> GroundStationConfig:
     """Read and validate a YAML configuration file.
 
-    Raises ConfigError if the file is missing, is not YAML, or fails validation.
+    Raises ConfigError, with a one-line reason, if the file is missing, larger than
+    :data:`MAX_FILE_BYTES`, not UTF-8, not one YAML document, repeats a key, or holds
+    nothing; and naming every bad field if it fails validation. Files the configuration
+    names are checked by :func:`check_files`.
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as file:
+            raw = file.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror}") from exc
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
-    return validate_config(data if data is not None else {}, str(path))
+    if len(raw) > MAX_FILE_BYTES:
+        raise ConfigError(f"{path}: larger than {MAX_FILE_BYTES >> 10} KiB: "
+                          "not a configuration")
+    data = _parse_yaml(raw, str(path))
+    if data is None:
+        raise ConfigError(f"{path}: empty (no sections, only comments or nothing): a "
+                          "configuration names at least one section; see config/lab.yaml")
+    return validate_config(data, str(path))
+
+
+def check_files(config: GroundStationConfig, source: str = "<config>") -> None:
+    """Check that the files the configuration names exist and can be used, as the flight
+    will open them: the waypoint CSV, the H-infinity gain, the control socket's CURVE
+    keys. Raises ConfigError naming every field whose file cannot be used.
+
+    Relative paths are taken from the working directory, as the flight takes them.
+    """
+    problems: list[tuple[str, object, str]] = []
+
+    def readable(field: str, path: Path | None) -> None:
+        if path is None:
+            return
+        if not path.exists():
+            problems.append((field, str(path), "no such file"))
+        elif not path.is_file():
+            problems.append((field, str(path), "not a file"))
+        elif not os.access(path, os.R_OK):
+            problems.append((field, str(path), "not readable"))
+
+    readable("trajectory.file", config.trajectory.file)
+    readable("controller.hinf.gain_file", config.controller.hinf.gain_file)
+    t = config.telemetry
+    if t.control_endpoint is not None and t.control_server_key is not None:
+        from groundstation.telemetry.curve import read_key_pair, read_public_keys
+
+        try:
+            read_key_pair(t.control_server_key)
+        except ValueError as exc:
+            problems.append(("telemetry.control_server_key", str(t.control_server_key),
+                             str(exc)))
+        try:
+            read_public_keys(t.control_client_keys or Path())  # set: the validator pairs them
+        except ValueError as exc:
+            problems.append(("telemetry.control_client_keys", str(t.control_client_keys),
+                             str(exc)))
+    if problems:
+        _raise(problems, source)
 
 
 def apply_overrides(
@@ -660,9 +929,11 @@ def apply_overrides(
             continue
         node = data
         *parents, leaf = dotted.split(".")
-        for key in parents:
-            if not isinstance(node.get(key), dict):
-                node[key] = {} if node.get(key) is None else node[key]
+        for i, key in enumerate(parents):
+            if node.get(key) is None:
+                node[key] = {}
+            if not isinstance(node[key], dict):
+                _raise([(".".join(parents[:i + 1]), node[key], "not a section")], "override")
             node = node[key]
         node[leaf] = copy.deepcopy(value)
     return validate_config(data, "override")

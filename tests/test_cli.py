@@ -88,6 +88,45 @@ def test_channels_talks_to_the_control_socket() -> None:
                     {"request": "channels", "auto": ["elevator"]}]
 
 
+def test_channels_with_curve_keys(tmp_path: Path) -> None:
+    import zmq.auth
+
+    from groundstation.telemetry.curve import load_server_keys
+
+    (tmp_path / "clients").mkdir()
+    server, _ = zmq.auth.create_certificates(tmp_path, "server")
+    zmq.auth.create_certificates(tmp_path / "clients", "alice")
+    alice = str(tmp_path / "clients" / "alice.key_secret")
+    curve = load_server_keys(tmp_path / "server.key_secret", tmp_path / "clients")
+    reply = {"ok": True, "auto": ["thrust"], "state": "TRACK"}
+    with ControlServer("tcp://127.0.0.1:*", curve=curve) as control:
+        assert control.endpoint is not None
+        stop = threading.Event()
+
+        def serve() -> None:
+            while not stop.wait(0.001):
+                control.poll(lambda request: reply)
+
+        thread = threading.Thread(target=serve, daemon=True)
+        thread.start()
+        try:
+            ok = runner.invoke(app, ["channels", "thrust", "--endpoint", control.endpoint,
+                                     "--server-key", server, "--client-key", alice])
+            keyless = runner.invoke(app, ["channels", "--endpoint", control.endpoint,
+                                          "--timeout", "0.3"])
+            half = runner.invoke(app, ["channels", "--endpoint", control.endpoint,
+                                       "--server-key", server])
+            public_only = runner.invoke(app, ["channels", "--endpoint", control.endpoint,
+                                              "--server-key", server, "--client-key", server])
+        finally:
+            stop.set()
+            thread.join(5.0)
+    assert ok.exit_code == 0 and "automatic: thrust  (state TRACK)" in ok.output, ok.output
+    assert keyless.exit_code == 1 and "--server-key" in keyless.output
+    assert half.exit_code == 2 and "go together" in half.output
+    assert public_only.exit_code == 2 and "no secret key" in public_only.output
+
+
 def test_channels_without_a_daemon_fails_clearly() -> None:
     res = runner.invoke(app, ["channels", "--endpoint", "tcp://127.0.0.1:9", "--timeout", "0.2"])
     assert res.exit_code == 1 and "no reply from tcp://127.0.0.1:9 within 0.2 s" in res.output
@@ -118,4 +157,26 @@ def test_check_config_refuses_a_missing_waypoint_file(tmp_path: Path) -> None:
     missing = tmp_path / "absent.csv"
     res = runner.invoke(app, ["check-config", str(_config_file(
         tmp_path, f"trajectory:\n  name: waypoints\n  file: {missing}\n"))])
-    assert res.exit_code == 2 and "absent.csv: cannot read waypoints" in res.output
+    assert res.exit_code == 2 and f"trajectory.file: '{missing}': no such file" in res.output
+
+
+def test_fly_help_documents_every_exit_code() -> None:
+    """`gs fly --help` names each exit code `gs fly` can return (issue 14 item 5)."""
+    from groundstation.loop.flight import EXIT_CODES
+
+    result = runner.invoke(app, ["fly", "--help"], terminal_width=100)
+    assert result.exit_code == 0
+    text = " ".join(result.output.split())
+    for code, meaning in EXIT_CODES.items():
+        first_words = " ".join(meaning.split()[:2]).rstrip(":,")
+        assert f"{code} {first_words}" in text, (code, first_words)
+
+
+def test_fly_on_a_port_that_is_not_there_exits_3(tmp_path: Path) -> None:
+    """Could not start: nothing was connected, nothing sent."""
+    cfg = tmp_path / "fly.yaml"
+    cfg.write_text(f"serial:\n  port: {tmp_path / 'no-such-tty'}\nlogging:\n"
+                   f"  flight_log_dir: {tmp_path / 'logs'}\n", encoding="utf-8")
+    result = runner.invoke(app, ["fly", "--config", str(cfg), "--trajectory", "hover"])
+    assert result.exit_code == 3, result.output
+    assert "cannot open serial port" in result.output

@@ -112,8 +112,9 @@ def test_load_config_file_problems(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="mapping"):
         load_config(scalar)
     empty = tmp_path / "empty.yaml"
-    empty.write_text("")
-    assert load_config(empty) == GroundStationConfig()
+    empty.write_text("")  # an empty file is a mistake, not "all defaults" (issue 14)
+    with pytest.raises(ConfigError, match="empty"):
+        load_config(empty)
 
 
 def test_overrides_are_validated_like_the_file() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from types import TracebackType
 from typing import Any, Self
 
@@ -25,11 +26,24 @@ class ZmqOwner:
         self._context: zmq.Context[Any] | None = zmq.Context() if self._own_context else shared
 
     def _bind_socket(self, kind: int, endpoint: str, what: str,
-                     options: dict[int, int] | None = None) -> str:
+                     options: Mapping[int, int | bytes] | None = None) -> str:
         """Create a socket of ``kind`` with ``options`` (LINGER 0 always), bind it to
         ``endpoint`` and keep it as :attr:`_socket`; returns the bound endpoint with the
         actual port. On failure closes everything and raises TelemetryError naming
         ``what`` and the endpoint."""
+        try:
+            self._socket, last = self._new_bound_socket(kind, endpoint, options)
+        except zmq.ZMQError as exc:
+            self._close_context()
+            raise TelemetryError(f"{what}: cannot bind {endpoint!r}: {exc}") from exc
+        return last
+
+    def _new_bound_socket(self, kind: int, endpoint: str,
+                          options: Mapping[int, int | bytes] | None = None
+                          ) -> tuple[zmq.Socket[Any], str]:
+        """A socket of ``kind`` with ``options`` (LINGER 0 always) bound to ``endpoint``,
+        and the bound endpoint with the actual port; closes it and re-raises the
+        ZMQError if it cannot be set up. The context stays open."""
         assert self._context is not None
         sock = self._context.socket(kind)
         try:
@@ -38,12 +52,10 @@ class ZmqOwner:
                 sock.setsockopt(option, value)
             sock.bind(endpoint)
             last = sock.getsockopt(zmq.LAST_ENDPOINT)
-        except zmq.ZMQError as exc:
+        except zmq.ZMQError:
             sock.close(linger=0)
-            self._close_context()
-            raise TelemetryError(f"{what}: cannot bind {endpoint!r}: {exc}") from exc
-        self._socket = sock
-        return last.decode() if isinstance(last, bytes) else str(last)
+            raise
+        return sock, last.decode() if isinstance(last, bytes) else str(last)
 
     def _close_context(self) -> None:
         if self._own_context and self._context is not None:
