@@ -246,6 +246,17 @@ class VirtualLab:
         """Lose Vicon tracking for ``duration`` [s] from ``start`` (default: now)."""
         self.vicon.add_outage(self.t if start is None else start, duration)
 
+    def pause_vicon(self, duration: float, start: float | None = None) -> None:
+        """Send no Vicon datagram at all for ``duration`` [s] from ``start`` (default: now);
+        Tracker's frame number keeps counting (see :meth:`VirtualVicon.add_pause`)."""
+        self.vicon.add_pause(self.t if start is None else start, duration)
+
+    def inject_vicon(self, datagrams: Sequence[tuple[float, bytes]]) -> None:
+        """Deliver foreign datagrams ``(t [s], bytes)`` among Vicon's own, as another sender
+        on the Vicon port would (see :func:`sim_device.vicon.foreign_stream`)."""
+        for t, data in datagrams:
+            self.vicon.inject(t, data)
+
     def set_vicon(self, *, rate_hz: float | None = None,
                   loss_encoding: LossEncoding | None = None, noise: bool | None = None) -> None:
         """Change the Vicon rate [Hz], loss encoding or noise at run time."""

@@ -17,12 +17,23 @@ component, then renormalised). Lost tracking is sent in the selected encoding:
   (the thesis lab, Ch. 7.3.1).
 
 The frame number counts datagrams, +1 each, wrapping at 2**32.
+
+Two more faults for tests of the ground station's input path (issue 14):
+
+* a **pause** (:meth:`VirtualVicon.add_pause`): nothing is sent at all (Tracker or
+  the network stalls); the frame number keeps counting, as Tracker's cameras do, so
+  the first datagram after it jumps ahead;
+* **foreign datagrams** (:meth:`VirtualVicon.inject`): any bytes delivered at a
+  chosen time among the Tracker's own, as a hostile or misconfigured sender on the
+  Vicon port would; :func:`foreign_stream` builds a stream of them.
 """
 
 from __future__ import annotations
 
+import heapq
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,8 +51,8 @@ class ViconDatagram:
 
     t : delivery time, simulated [s] (pose instant + latency)
     data : the datagram bytes, exactly as sent over UDP
-    frame : its Tracker frame number
-    tracked : True if it carries a measured pose, False if a loss encoding
+    frame : its Tracker frame number (a foreign datagram's first 4 bytes, -1 if shorter)
+    tracked : True if it carries a measured pose, False if a loss encoding or foreign
     """
 
     t: float
@@ -77,8 +88,12 @@ class VirtualVicon:
         self._frame = params.first_frame & 0xFFFF_FFFF
         self._held: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._queue: deque[tuple[int, ViconDatagram]] = deque()
+        self._pauses: list[tuple[int, int]] = []
+        self._foreign: list[tuple[int, int, ViconDatagram]] = []  # heap: (t_ns, seq, datagram)
         self.sent = 0
         self.lost = 0
+        self.paused = 0
+        self.injected = 0
 
     def set_rate(self, rate_hz: float) -> None:
         """Change the datagram rate [Hz] (takes effect after the next datagram)."""
@@ -90,6 +105,22 @@ class VirtualVicon:
         """No tracking from ``start`` for ``duration`` (simulated seconds)."""
         begin = seconds_to_ns(start)
         self._outages.append((begin, begin + seconds_to_ns(duration)))
+
+    def add_pause(self, start: float, duration: float) -> None:
+        """Send nothing from ``start`` for ``duration`` (simulated seconds); the frame
+        number keeps counting through the pause (counted in :attr:`paused`)."""
+        begin = seconds_to_ns(start)
+        self._pauses.append((begin, begin + seconds_to_ns(duration)))
+
+    def inject(self, t: float, data: bytes) -> None:
+        """Deliver ``data`` (any bytes: a datagram of another sender) at simulated time
+        ``t`` [s], in time order with the Tracker's own; ``tracked`` is False for it and
+        ``frame`` the uint32 in its first 4 bytes (-1 if shorter)."""
+        t_ns = seconds_to_ns(t)
+        frame = int.from_bytes(data[:4], "little") if len(data) >= 4 else -1
+        heapq.heappush(self._foreign,
+                       (t_ns, self.injected, ViconDatagram(t_ns * 1e-9, bytes(data), frame, False)))
+        self.injected += 1
 
     def tracked(self, t_ns: int, plant: Plant) -> bool:
         """The object is tracked at ``t_ns``: in the volume, tilt within limit, no outage."""
@@ -109,6 +140,10 @@ class VirtualVicon:
         self.next_ns += self.period_ns
         if self.next_ns <= t_ns:
             self.next_ns = t_ns + self.period_ns
+        if any(begin <= t_ns < end for begin, end in self._pauses):
+            self._frame = (self._frame + 1) & 0xFFFF_FFFF
+            self.paused += 1
+            return
         tracked = self.tracked(t_ns, plant)
         objects: list[ObjectPose] = []
         name = self.params.object_name
@@ -143,12 +178,31 @@ class VirtualVicon:
     @property
     def next_due_ns(self) -> int | None:
         """Delivery time of the oldest datagram in flight [ns], or None."""
-        return self._queue[0][0] if self._queue else None
+        due = [t for t in (self._queue[0][0] if self._queue else None,
+                           self._foreign[0][0] if self._foreign else None) if t is not None]
+        return min(due) if due else None
 
     def pop_due(self, t_ns: int) -> list[ViconDatagram]:
-        """Datagrams delivered by simulated time ``t_ns`` [ns], in order."""
-        q = self._queue
+        """Datagrams delivered by simulated time ``t_ns`` [ns], in order (at equal times
+        the Tracker's own first)."""
+        q, foreign = self._queue, self._foreign
         out: list[ViconDatagram] = []
-        while q and q[0][0] <= t_ns:
-            out.append(q.popleft()[1])
-        return out
+        while True:
+            own = q[0][0] if q and q[0][0] <= t_ns else None
+            other = foreign[0][0] if foreign and foreign[0][0] <= t_ns else None
+            if own is None and other is None:
+                return out
+            if other is None or (own is not None and own <= other):
+                out.append(q.popleft()[1])
+            else:
+                out.append(heapq.heappop(foreign)[2])
+
+
+def foreign_stream(start: float, duration: float, rate_hz: float,
+                   make: Callable[[int, float], bytes]) -> list[tuple[float, bytes]]:
+    """``(t [s], datagram)`` pairs of a foreign sender at ``rate_hz`` from ``start`` for
+    ``duration``: ``make(k, t)`` builds the k-th datagram (k = 0, 1, ...), e.g. with
+    :func:`groundstation.vicon.decoder.encode_datagram`. Feed them to
+    :meth:`VirtualVicon.inject` (or :meth:`sim_device.lab.VirtualLab.inject_vicon`)."""
+    n = math.floor(duration * rate_hz + 1e-9)
+    return [(start + k / rate_hz, make(k, start + k / rate_hz)) for k in range(n)]

@@ -9,6 +9,7 @@ import pytest
 
 from groundstation.errors import EstimatorError
 from groundstation.estimation import Ekf, EkfParams, Estimator, PoseHoldEstimator
+from groundstation.estimation.records import UpdateReason
 from groundstation.estimation.testing import (
     SensorNoise,
     TruthSimulator,
@@ -88,26 +89,152 @@ def test_outlier_is_gated_counted_and_does_not_move_the_estimate() -> None:
     assert ekf.update(sim.pose()).reason == "ok"
 
 
-def test_persistent_gating_resets_to_vicon() -> None:
-    # A wrong start (0.5 m off) with an over-confident covariance gates every pose;
-    # after gate_reset_after (0.5 s) and gate_reset_count poses the filter re-anchors.
+def _wrong_start(offset_m: float) -> tuple[Ekf, TruthSimulator, list[UpdateReason]]:
+    """A start ``offset_m`` off in x with an over-confident covariance, then 1.5 s of
+    true poses at 100 Hz; the update reasons."""
     sim = TruthSimulator(hover_reference(), noise=BIASED, seed=3)
     p = EkfParams(initial_variance=(1e-8,) * 3 + (1e-4,) * 4 + (1e-2,) * 3 + (1e-3,) * 3
                   + (1e-1,) * 3)
     ekf = Ekf(p)
     wrong = sim.pose()
-    off = wrong.position + np.array([0.5, 0.0, 0.0])
+    off = wrong.position + np.array([offset_m, 0.0, 0.0])
     ekf.initialise(Pose(wrong.t, off, wrong.quaternion), [sim.imu()])
     reasons = []
     for _ in range(150):
         sim.step()
         ekf.predict(sim.imu())
         reasons.append(ekf.update(sim.pose()).reason)
+    return ekf, sim, reasons
+
+
+def test_persistent_gating_resets_to_vicon() -> None:
+    # A start 15 cm off (within what the IMU may have missed: 5.3 sigma of
+    # reset_position_sigma = 4 cm) gates every pose; after gate_reset_after (0.2 s) and
+    # gate_reset_count consistent poses the filter re-anchors.
+    ekf, sim, reasons = _wrong_start(0.15)
     assert reasons.count("reset") == 1
     first_reset = reasons.index("reset")
-    assert set(reasons[:first_reset]) == {"gated"} and first_reset >= p.gate_reset_count
+    assert set(reasons[:first_reset]) == {"gated"}
+    assert first_reset >= ekf.params.gate_reset_count - 1
     assert ekf.health().resets == 1
     assert np.linalg.norm(ekf.state[0:3] - sim.x[0:3]) < 2e-3
+
+
+def test_a_reset_waits_until_the_prediction_can_explain_the_jump() -> None:
+    # 0.5 m between Vicon and the estimate is more than the IMU may have missed (5.3 sigma
+    # of reset_position_sigma = 4 cm is 21 cm): those poses are refused as reset candidates
+    # while the prediction is certain, and taken only once its own covariance, grown with
+    # the time since the last fix (here mostly the initial velocity uncertainty), explains
+    # them. The 0.15 m start above is re-anchored as soon as gate_reset_after allows.
+    small = _wrong_start(0.15)[2].index("reset")
+    ekf, sim, reasons = _wrong_start(0.5)
+    first = reasons.index("reset")
+    assert set(reasons[:first]) == {"gated"} and first > 2 * small
+    h = ekf.health()
+    assert h.resets == 1 and h.refused_resets >= first - small
+    sigma = math.sqrt(float(np.trace(ekf.error_covariance[0:3, 0:3])))
+    assert sigma < 0.01  # certain again after the reset
+    assert np.linalg.norm(ekf.state[0:3] - sim.x[0:3]) < 2e-3
+
+
+def _after_a_gap(gap_s: float = 1.5) -> tuple[Ekf, TruthSimulator]:
+    """A tracking EKF, then ``gap_s`` of IMU samples without a pose (a Vicon pause)."""
+    ekf, sim = _started()
+    for _ in range(round(gap_s / 0.01)):
+        sim.step()
+        ekf.predict(sim.imu())
+    return ekf, sim
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@pytest.mark.parametrize("position", [(1e297, 0.0, -1.0), (0.0, -1e308, 0.0),
+                                      (100.0, 0.0, -1.0), (0.0, 0.0, 3.0)],
+                         ids=["1e297", "-1e308", "100m", "below-floor"])
+def test_implausible_poses_are_refused_and_never_reset_the_filter(
+        position: tuple[float, float, float]) -> None:
+    """Issue 14: 99 poses of absurd (or finite but impossible) positions after a 1.5 s
+    gap. They are outside the plausible volume (safety volume + vicon margin), so they
+    are refused before any arithmetic: no reset, no overflow warning, state untouched."""
+    ekf, sim = _after_a_gap()
+    q = sim.pose().quaternion
+    for _ in range(99):
+        sim.step()
+        ekf.predict(sim.imu())
+        before = ekf.state
+        r = ekf.update(Pose(sim.t, np.array(position), q, 0))
+        assert (r.accepted, r.reason) == (False, "implausible")
+        np.testing.assert_array_equal(ekf.state, before)
+    h = ekf.health()
+    assert (h.implausible_poses, h.resets, h.updates, h.gated) == (99, 0, 500, 0)
+    assert h.time_since_fix == pytest.approx(2.49, abs=0.02)
+    for _ in range(20):
+        sim.step()
+        ekf.predict(sim.imu())
+        assert ekf.update(sim.pose()).reason == "ok"  # 2.5 s of dead reckoning: within the gate
+    assert ekf.health().resets == 0
+    assert np.linalg.norm(ekf.state[0:3] - sim.x[0:3]) < 3e-3
+
+
+def _jump_after_a_gap(gap_s: float, n: int) -> tuple[Ekf, TruthSimulator, list[UpdateReason]]:
+    """``n`` poses 30 cm off the truth (consistent: Table 6.1-sized noise) after ``gap_s``
+    without a pose; the update reasons."""
+    ekf, sim = _after_a_gap(gap_s)
+    rng = np.random.default_rng(4)
+    reasons = []
+    for _ in range(n):
+        sim.step()
+        ekf.predict(sim.imu())
+        p = sim.pose()
+        bad = p.position + np.array([0.3, 0.0, 0.0]) + rng.normal(0.0, 6e-4, 3)
+        reasons.append(ekf.update(Pose(p.t, bad, p.quaternion, p.frame)).reason)
+    return ekf, sim, reasons
+
+
+def test_a_consistent_jump_the_imu_did_not_see_is_never_fused() -> None:
+    """Issue 14: after a 1 s gap, 0.5 s of poses 30 cm off that stay consistent (a
+    hostile sender, or a reflection). The IMU saw the vehicle fly the square: the jump
+    is 13 sigma of the dead-reckoned covariance and more than a missed velocity
+    explains, so it is gated every time and never re-anchored to; the true poses are
+    then fused at once."""
+    ekf, sim, reasons = _jump_after_a_gap(1.0, 50)
+    assert set(reasons) == {"gated"}
+    h = ekf.health()
+    assert h.resets == 0 and h.refused_resets == 50
+    assert np.linalg.norm(ekf.state[0:3] - sim.x[0:3]) < 0.05  # 1.5 s of dead reckoning
+    sim.step()
+    ekf.predict(sim.imu())
+    assert ekf.update(sim.pose()).reason == "ok"
+
+
+def test_a_jump_is_taken_once_the_dead_reckoned_covariance_covers_it() -> None:
+    """The other side of the bound: it grows with the time since the last fix. The same
+    30 cm, consistent for long enough that the dead-reckoned estimate no longer rules
+    it out (here 1.7 s after the last fix; its own x sigma is then ~3 cm), is re-anchored
+    to.
+    Against a sender that outlasts the prediction only the supervisor helps: it holds
+    on the IMU after vicon_loss_hold_s without a fused pose and lands after
+    vicon_loss_land_s (2 s), before the bound is that wide in a hover."""
+    ekf, _, reasons = _jump_after_a_gap(1.5, 150)
+    first = reasons.index("reset")
+    assert set(reasons[:first]) == {"gated"} and 10 < first < 40
+    assert ekf.health().refused_resets == first - (ekf.params.gate_reset_count - 1)
+
+
+def test_a_reset_needs_poses_that_agree_with_each_other() -> None:
+    """Issue 14: after a gap, poses alternately 15 cm either side of the truth. Each is
+    within what the IMU may have missed, but no two in a row agree (30 cm in 10 ms is
+    beyond max speed), so none re-anchors the filter."""
+    ekf, sim = _after_a_gap(1.0)
+    for k in range(40):
+        sim.step()
+        ekf.predict(sim.imu())
+        p = sim.pose()
+        side = 0.15 if k % 2 == 0 else -0.15
+        r = ekf.update(Pose(p.t, p.position + np.array([side, 0.0, 0.0]), p.quaternion, 0))
+        assert r.reason == "gated"
+    h = ekf.health()
+    assert h.resets == 0 and h.refused_resets == 39
+    assert np.linalg.norm(ekf.state[0:3] - sim.x[0:3]) < 0.04
 
 
 def test_repeated_samples_are_ignored() -> None:

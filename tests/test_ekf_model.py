@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from groundstation.config import EstimatorConfig, VehicleConfig
+from groundstation.config import EstimatorConfig, SafetyConfig, VehicleConfig, ViconConfig
 from groundstation.estimation import Ekf, EkfParams
 from groundstation.estimation.imu_model import (
     boxminus,
@@ -146,6 +146,19 @@ def test_params_from_config_and_validation() -> None:
     with pytest.raises(ValueError):
         EkfParams(initial_variance=(1.0,) * 15)
     assert math.isclose(EkfParams().imu_period, 0.01)
+    with pytest.raises(ValueError):
+        EkfParams(plausible_volume=((1.0, -1.0), (-1.0, 1.0), (-2.0, 0.0)))
+
+
+def test_params_take_the_reset_and_the_plausible_volume_from_vicon_and_safety() -> None:
+    default = EkfParams.from_config(VehicleConfig(), EstimatorConfig(), ViconConfig(),
+                                    SafetyConfig())
+    assert default == EkfParams()  # the defaults agree with the configuration's
+    vicon = ViconConfig(reanchor_poses=5, plausibility_margin_m=0.0, max_speed_m_s=2.0)
+    safety = SafetyConfig(volume_x=(-1.0, 1.0))
+    p = EkfParams.from_config(VehicleConfig(), EstimatorConfig(), vicon, safety)
+    assert (p.gate_reset_count, p.max_speed, p.max_rotation_rate) == (5, 2.0, 30.0)
+    assert p.plausible_volume == ((-1.0, 1.0), (-1.5, 1.5), (-2.0, 0.05))
 
 
 def test_process_noise_equals_g_qc_gt() -> None:

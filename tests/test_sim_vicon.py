@@ -17,10 +17,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from groundstation.config import load_config
-from groundstation.vicon.decoder import ViconFrame, decode_datagram
+from groundstation.vicon.decoder import ViconFrame, decode_datagram, encode_datagram
 from groundstation.vicon.frames import FrameConversion
 from sim_device import LabParams, ViconSimParams, VirtualLab
 from sim_device.params import LossEncoding
+from sim_device.vicon import foreign_stream
 
 FLIP_X = np.diag([1.0, -1.0, -1.0])
 
@@ -101,6 +102,34 @@ def test_outage_injected_at_run_time() -> None:
     lost = [d for d in lab.vicon_datagrams() if not d.tracked]
     assert len(lost) == 20
     assert lost[0].t == pytest.approx(0.305)
+
+
+def test_pause_sends_nothing_while_the_frame_number_counts_on() -> None:
+    lab = lab_with()
+    lab.advance(0.3)
+    lab.pause_vicon(0.2)  # Tracker or the network stalls from 0.3 s to 0.5 s
+    lab.advance(0.5)
+    dgrams = lab.vicon_datagrams()
+    assert not [d for d in dgrams if 0.305 <= d.t < 0.505]
+    after = next(d for d in dgrams if d.t >= 0.505)
+    assert after.frame == 1 + 50 and after.tracked  # 20 frames were never sent
+    assert lab.vicon.paused == 20 and lab.stats().vicon_sent == 80 - 20
+
+
+def test_foreign_datagrams_are_delivered_in_time_order() -> None:
+    lab = lab_with(pad_to=None)
+    stream = foreign_stream(0.0123, 0.05, 100.0,
+                            lambda k, t: encode_datagram(7000 + k, [], pad_to=None))
+    assert [round(t, 4) for t, _ in stream] == [0.0123, 0.0223, 0.0323, 0.0423, 0.0523]
+    lab.inject_vicon([*stream, (0.0, b"\x01")])  # any bytes, even a short one
+    lab.advance(0.06)
+    dgrams = lab.vicon_datagrams()
+    assert [d.t for d in dgrams] == sorted(d.t for d in dgrams)
+    foreign = [d for d in dgrams if d.frame >= 7000 or d.frame == -1]
+    assert [d.frame for d in foreign] == [-1, 7000, 7001, 7002, 7003, 7004]
+    assert not any(d.tracked for d in foreign)
+    assert foreign[1].data == stream[0][1] and foreign[1].t == pytest.approx(0.0123)
+    assert len(dgrams) - len(foreign) == 6  # Tracker's own, 5 ms latency, 100 Hz
 
 
 @pytest.mark.parametrize(

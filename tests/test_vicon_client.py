@@ -49,21 +49,21 @@ def test_round_trip_over_loopback(sender: socket.socket) -> None:
         assert port > 0
         assert client.latest() is None
         sender.sendto(datagram(1, 100.0, b"wand"), (host, port))  # other object: no pose
-        for frame in (2, 3, 4):
+        for frame in (2, 3, 4, 5, 6):  # the first two confirm the stream (reanchor_poses 3)
             sender.sendto(datagram(frame, 100.0 + frame), (host, port))
         poses = [client.get(timeout=TIMEOUT) for _ in range(3)]
         assert all(p is not None for p in poses)
-        assert [p.frame for p in poses if p is not None] == [2, 3, 4]
+        assert [p.frame for p in poses if p is not None] == [4, 5, 6]
         first = poses[0]
         assert first is not None
         assert first.t == pytest.approx(123.0 - 0.004)
-        # Vicon (102, 200, 1000) mm -> NED (0.102, -0.2, -1.0) m with the default C_wn.
-        np.testing.assert_allclose(first.position, [0.102, -0.2, -1.0])
+        # Vicon (104, 200, 1000) mm -> NED (0.104, -0.2, -1.0) m with the default C_wn.
+        np.testing.assert_allclose(first.position, [0.104, -0.2, -1.0])
         latest = client.latest()
         assert latest is not None
-        assert latest.frame == 4
+        assert latest.frame == 6
         h = client.health()
-        assert (h.datagrams, h.poses, h.lost_missing) == (4, 3, 1)
+        assert (h.datagrams, h.poses, h.lost_missing, h.unconfirmed) == (6, 3, 1, 2)
         assert client.get(timeout=0.01) is None  # queue drained
 
 
@@ -72,7 +72,8 @@ def test_monotonic_stamp_brackets_the_receive(sender: socket.socket) -> None:
 
     with ViconClient("127.0.0.1", 0, "quad", latency_s=0.0) as client:
         before = time.monotonic()
-        sender.sendto(datagram(1, 0.0), client.address)
+        for frame in (1, 2, 3):
+            sender.sendto(datagram(frame, 0.0), client.address)
         pose = client.get(timeout=TIMEOUT)
         after = time.monotonic()
     assert pose is not None
@@ -83,7 +84,8 @@ def test_bad_datagrams_do_not_stop_the_reader(sender: socket.socket) -> None:
     with ViconClient("127.0.0.1", 0, "quad") as client:
         sender.sendto(b"", client.address)
         sender.sendto(b"\x01\x00\x00\x00\x05garbage", client.address)
-        sender.sendto(datagram(7, 1.0), client.address)
+        for frame in (5, 6, 7):
+            sender.sendto(datagram(frame, 1.0), client.address)
         pose = client.get(timeout=TIMEOUT)
         assert pose is not None
         assert pose.frame == 7
@@ -154,22 +156,25 @@ def test_filter_options_are_passed_through(sender: socket.socket) -> None:
         "127.0.0.1", 0, "quad", max_speed=0.1, position_slack=0.0, reanchor_after_s=60.0
     ) as client:
         assert client.filter.max_speed == 0.1
-        sender.sendto(datagram(1, 0.0), client.address)
-        sender.sendto(datagram(2, 900.0), client.address)  # 0.9 m jump: an outlier
-        sender.sendto(datagram(3, 0.0), client.address)
+        for frame in (1, 2, 3):
+            sender.sendto(datagram(frame, 0.0), client.address)
+        sender.sendto(datagram(4, 900.0), client.address)  # 0.9 m jump: an outlier
+        sender.sendto(datagram(5, 0.0), client.address)
         frames = [client.get(timeout=TIMEOUT), client.get(timeout=TIMEOUT)]
-        assert [p.frame for p in frames if p is not None] == [1, 3]
+        assert [p.frame for p in frames if p is not None] == [3, 5]
         assert client.health().outliers == 1
 
 
 def test_from_config(sender: socket.socket) -> None:
     from groundstation.config import load_config
 
-    cfg = load_config("config/sim.yaml").vicon
+    sim = load_config("config/sim.yaml")
     # Port 0 for the test (model_copy does not re-validate the 1..65535 range).
-    cfg = cfg.model_copy(update={"bind_address": "127.0.0.1", "port": 0})
-    with ViconClient.from_config(cfg, clock=lambda: 7.0) as client:
-        sender.sendto(datagram(1, 0.0, cfg.object_name.encode()), client.address)
+    cfg = sim.vicon.model_copy(update={"bind_address": "127.0.0.1", "port": 0})
+    with ViconClient.from_config(cfg, sim.safety, clock=lambda: 7.0) as client:
+        assert client.filter.plausibility.volume == cfg.plausible_volume(sim.safety)
+        for frame in (1, 2, 3):
+            sender.sendto(datagram(frame, 0.0, cfg.object_name.encode()), client.address)
         pose = client.get(timeout=TIMEOUT)
     assert pose is not None
     assert pose.t == pytest.approx(7.0 - cfg.latency_s)

@@ -31,7 +31,13 @@ Fault handling (Ch. 7.3): Algorithm 1 (a repeated IMU counter/values or a
 repeated pose is not new information and is skipped - the thesis's ``R = 1e8``
 has the same effect), Algorithm 2 (an identity quaternion means Vicon lost the
 object: skipped), and a chi-square innovation gate that rejects and counts
-outliers; after persistent gating the next pose re-anchors position and attitude.
+outliers. A pose outside the plausible volume is refused before any arithmetic
+(issue 14). After persistent gating the filter re-anchors position and attitude,
+but only on ``gate_reset_count`` consecutive gated poses that agree with each other
+and with the IMU prediction within its covariance plus what the IMU may have
+missed (see :class:`EkfParams`): never on one pose, and never on a jump the IMU
+did not see. A repeated pose is one with identical values: a frame number alone
+says nothing (another sender may reuse Tracker's).
 """
 
 from __future__ import annotations
@@ -56,6 +62,8 @@ __all__ = ["Ekf"]
 
 _NAN = float("nan")
 _NOT_INIT = UpdateResult(False, _NAN, "not_initialised")
+_POSITION_SLACK = 0.02  # [m] jump always allowed between reset candidates (the pose filter's)
+_ANGLE_SLACK = 0.05  # [rad] rotation always allowed between reset candidates (likewise)
 
 
 class _Fused:
@@ -87,6 +95,9 @@ class Ekf:
         self._r = p.measurement_variance()  # R is diagonal (6,)
         self._R = np.diag(self._r)
         self._gate = float(chi2.ppf(p.gate_probability, 6))
+        self._r_reset = self._r + np.r_[[p.reset_position_sigma**2] * 3,
+                                        [p.reset_attitude_sigma**2] * 3]
+        self._volume = p.plausible_volume
         self._fidx, fconst = jacobian_flat_index()
         self._F = fconst
         self._I = np.eye(N_ERR)
@@ -275,7 +286,16 @@ class Ekf:
             repeated_imu=self.repeated_imu,
             invalid_imu=self.invalid_imu,
             stale_imu=self.stale_imu,
+            implausible_poses=self.implausible_poses,
+            refused_resets=self.refused_resets,
         )
+
+    @property
+    def time_since_fix(self) -> float:
+        """Filter time minus the newest fused pose's time [s] (inf before
+        :meth:`initialise`): how long the estimate has gone without Vicon, whether
+        Vicon was silent or its poses were refused (the cheap subset of :meth:`health`)."""
+        return self._t - self._t_fix if self._initialised else math.inf
 
     @property
     def diverged(self) -> bool:
@@ -308,7 +328,9 @@ class Ekf:
         self.updates = self.gated = self.repeated_poses = self.lost_tracking = 0
         self.too_old = self.future = self.invalid_poses = self.resets = self.late_poses = 0
         self.repeated_imu = self.invalid_imu = self.stale_imu = 0
+        self.implausible_poses = self.refused_resets = 0
         self.consecutive_gated = 0
+        self._candidates: list[Pose] = []
         self.last_nis = _NAN
         self._first_imu = False
         self._t_fix = _NAN
@@ -322,15 +344,16 @@ class Ekf:
         if len(p) != 3 or len(q) != 4 or not all(map(math.isfinite, p + q)) or abs(n2 - 1) > 0.1:
             self.invalid_poses += 1
             return UpdateResult(False, _NAN, "invalid")
+        box = self._volume
+        if box is not None and not all(lo <= v <= hi for v, (lo, hi) in zip(p, box, strict=True)):
+            self.implausible_poses += 1
+            return UpdateResult(False, _NAN, "implausible")
         if q == [1.0, 0.0, 0.0, 0.0]:  # Algorithm 2: the lab's lost-tracking encoding
             self.lost_tracking += 1
             return UpdateResult(False, _NAN, "lost_tracking")
         last = self._last_pose
         self._last_pose = pose
-        if last is not None and (
-            (pose.frame != 0 and pose.frame == last.frame)
-            or (p == last.position.tolist() and q == last.quaternion.tolist())
-        ):
+        if last is not None and p == last.position.tolist() and q == last.quaternion.tolist():
             self.repeated_poses += 1
             return UpdateResult(False, _NAN, "repeated")
         return None
@@ -427,20 +450,20 @@ class Ekf:
         self._Pbias_diag += self._qbias * dt
 
     def _fuse(self, pose: Pose, gate: bool) -> UpdateResult:
-        """Gate and apply a new pose at the filter time; counts and records it."""
+        """Gate and apply a new pose at the filter time, or re-anchor on it if it completes
+        a run of reset candidates; counts and records it."""
         mode = "ok"
-        if (
-            self.consecutive_gated >= self.params.gate_reset_count
-            and self._t - self._t_fix >= self.params.gate_reset_after
-        ):
+        nis, applied = self._correct(pose, gate=gate, reset=False)
+        if not applied and self._completes_reset(pose):
             mode = "reset"
-        nis, applied = self._correct(pose, gate=gate and mode == "ok", reset=mode == "reset")
+            nis, applied = self._correct(pose, gate=False, reset=True)
         self.last_nis = nis
         if not applied:
             self.gated += 1
             self.consecutive_gated += 1
             return UpdateResult(False, nis, "gated")
         self.consecutive_gated = 0
+        self._candidates.clear()
         self.updates += 1
         self.resets += mode == "reset"
         self._t_fix = max(self._t_fix, float(pose.t))
@@ -448,6 +471,55 @@ class Ekf:
         while self._fused and self._fused[0].t < self._hist.oldest_time():
             self._fused.popleft()
         return UpdateResult(True, nis, "ok" if mode == "ok" else "reset")
+
+    def _completes_reset(self, pose: Pose) -> bool:
+        """Count the gated ``pose`` as a reset candidate (see :class:`EkfParams`); True if
+        it completes a run of ``gate_reset_count`` after ``gate_reset_after`` without a fix."""
+        p, run = self.params, self._candidates
+        if not self._explained(pose):
+            self.refused_resets += 1
+            run.clear()
+            return False
+        if run and not self._consistent(run[-1], pose):
+            self.refused_resets += 1
+            run.clear()
+        run.append(pose)
+        del run[:-p.gate_reset_count]
+        if len(run) < p.gate_reset_count or self._t - self._t_fix < p.gate_reset_after:
+            return False
+        run.clear()
+        return True
+
+    def _explained(self, pose: Pose) -> bool:
+        """The innovation of ``pose`` passes the gate with ``R`` grown by what the IMU may
+        have missed: the reset bound (the prediction's own covariance has grown with the
+        time since the last fix)."""
+        x, P = self._x, self._P
+        y = np.empty(6)
+        y[0:3] = pose.position - x[0:3]
+        y[3:6] = _attitude_residual(x[3:7].tolist(), pose.quaternion.tolist())
+        S = P[0:6, 0:6] + np.diag(self._r_reset)
+        c, info = lapack.dpotrf(S, lower=0, clean=0, overwrite_a=1)
+        if info != 0:
+            return False
+        sol, _ = lapack.dpotrs(c, y, lower=0)
+        return bool(float(y @ sol) <= self._gate)
+
+    def _consistent(self, a: Pose, b: Pose) -> bool:
+        """``b`` agrees with ``a``: jump and rotation within the speed / rotation-rate gate
+        for their spacing (as the pose filter's)."""
+        p = self.params
+        dt = abs(float(b.t) - float(a.t))
+        ax, ay, az = a.position.tolist()
+        bx, by, bz = b.position.tolist()
+        jump = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
+        p0, p1, p2, p3 = a.quaternion.tolist()
+        q0, q1, q2, q3 = b.quaternion.tolist()
+        n = math.sqrt((p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3) * (q0 * q0 + q1 * q1 + q2 * q2
+                                                                  + q3 * q3))
+        angle = 2.0 * math.acos(min(abs(p0 * q0 + p1 * q1 + p2 * q2 + p3 * q3) / n, 1.0))
+        return (jump <= p.max_speed * dt + _POSITION_SLACK
+                and angle <= p.max_rotation_rate * dt + _ANGLE_SLACK)
 
     def _correct(self, pose: Pose, gate: bool, reset: bool) -> tuple[float, bool]:
         """Measurement update at the filter time. Returns ``(nis, applied)``."""

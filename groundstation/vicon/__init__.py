@@ -3,8 +3,9 @@
 Data flow (``shared/DESIGN.md``)::
 
     UDP datagram -> decoder.decode_datagram -> ObjectPose (mm, Euler XYZ)
-        -> PoseFilter (frame numbers, lost tracking, outlier gate, health)
-        -> frames.vicon_to_ned -> groundstation.types.Pose (NED m, q scalar first)
+        -> PoseFilter (lost tracking, plausibility, frames.vicon_to_ned, pose streams with
+           their frame numbers and outlier gate, health)
+        -> groundstation.types.Pose (NED m, q scalar first)
 
 Only :class:`ViconClient` touches a socket; everything else is pure and testable
 with bytes. The byte layout is ``shared/spec/vicon-udp.md``; the frame

@@ -33,7 +33,7 @@ from groundstation.vicon.health import ViconHealth
 from groundstation.vicon.posefilter import FilterOptions, PoseFilter, filter_options
 
 if TYPE_CHECKING:  # config is only needed by from_config; no import cycle at run time
-    from groundstation.config import ViconConfig
+    from groundstation.config import SafetyConfig, ViconConfig
 
 DEFAULT_PORT = 51001
 MAX_DATAGRAM = 65536
@@ -101,11 +101,13 @@ class ViconClient:
     def from_config(
         cls,
         config: ViconConfig,
+        safety: SafetyConfig,
         *,
         clock: Callable[[], float] = time.monotonic,
         logger: structlog.typing.FilteringBoundLogger | None = None,
     ) -> ViconClient:
-        """Build (not start) a client from the ``vicon:`` configuration section."""
+        """Build (not start) a client from the ``vicon:`` configuration section, with the
+        flight volume of the ``safety:`` section (poses outside it are implausible)."""
         return cls(
             config.bind_address,
             config.port,
@@ -115,7 +117,7 @@ class ViconClient:
             config.latency_s,
             clock=clock,
             logger=logger,
-            **filter_options(config),
+            **filter_options(config, safety),
         )
 
     # -- lifecycle -------------------------------------------------------------

@@ -34,17 +34,23 @@ class ViconHealth:
     poses : poses accepted and returned
     rejected : per-reason count of datagrams rejected whole by the decoder
     skipped_items : items skipped (unknown id, or object size != 72)
-    frames_dropped : frames missing from forward gaps in the frame number
-    duplicates : datagrams repeating the last frame number (dropped)
-    reordered : datagrams older than the last frame (dropped)
-    restarts : Tracker restarts detected (long silence or large backward jump)
-    lost_missing : datagrams without the configured object
+    frames_dropped : frames missing from forward gaps in a passed stream's frame numbers
+        (only gaps the elapsed time explains: never more than Tracker could have sent)
+    duplicates : datagrams repeating their stream's last frame number (dropped)
+    reordered : datagrams older than their stream's last frame (dropped)
+    restarts : frame-number restarts passed (long silence, a jump no elapsed time
+        explains: a Tracker restart or a garbage frame number)
+    lost_missing : datagrams without the configured object (other objects only, or none)
     lost_zero : object reported with all six values exactly 0
     lost_held_identity : position held, rotations exactly (0, 0, 0)
     non_finite : object values NaN or infinite
-    outliers : poses rejected by the speed / rotation-rate gate
-    reanchors : implausible poses accepted because the last good pose was too old
+    outliers : poses that agreed with no stream (speed / rotation-rate gate)
+    reanchors : streams confirmed after the first: after a gap, or a new sender
     rate_warnings : rate-band warnings logged
+    implausible_position : poses outside the plausible volume (or absurd raw values)
+    implausible_rotation : Euler angles beyond a turn, or not converting to a rotation
+    unconfirmed : poses held back because their stream had fewer than
+        ``reanchor_poses`` consistent poses in a row (start-up, after a gap, new sender)
     """
 
     rate_hz: float
@@ -65,6 +71,9 @@ class ViconHealth:
     outliers: int
     reanchors: int
     rate_warnings: int
+    implausible_position: int
+    implausible_rotation: int
+    unconfirmed: int
 
     @property
     def rejected_datagrams(self) -> int:

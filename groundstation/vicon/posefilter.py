@@ -4,24 +4,28 @@
 :class:`groundstation.types.Pose` of the configured object, in this order:
 
 1. **Decode** (:mod:`.decoder`): a malformed datagram is counted and dropped.
-2. **Frame number.** A forward gap of n > 1 counts n - 1 dropped frames. A
-   repeated frame number (duplicate) or an older one (reordered) is dropped,
-   unless it follows a silence longer than ``restart_silence_s`` or jumps back
-   by more than ``restart_backward_frames``: that is a Tracker restart, counted
-   and accepted (so is the uint32 wrap-around).
-3. **Lost tracking** ("no measurement", counted by kind): the object is missing;
-   all six values are exactly 0.0 (Vicon SDK, occluded object); or all three
-   rotations are exactly 0.0 while the translation equals the previous one
-   reported for this object, or there is no previous one (the thesis's lab,
-   Ch. 7.3.1, Algorithm 2). Non-finite values are also dropped and counted.
-4. **Convert** (:mod:`.frames`) and stamp ``t = t_receive - latency_s``.
-5. **Plausibility gate** against the last accepted pose, ``dt`` apart: reject
-   (count an outlier) if ``|dp| > max_speed * dt + position_slack`` or the
-   rotation angle ``> max_rotation_rate * dt + angle_slack``. The slack absorbs
-   receive-time jitter (a backlog of datagrams read at nearly the same time) and
-   noise. If the last accepted pose is older than ``reanchor_after_s`` the pose is
-   accepted anyway and becomes the new anchor (so one bad anchor cannot lock
-   the gate forever).
+2. **Lost tracking** ("no measurement", counted by kind): the object is missing;
+   a value is NaN or infinite; all six values are exactly 0.0 (Vicon SDK,
+   occluded object); or all three rotations are exactly 0.0 while the translation
+   equals the last one of a pose stream, or there is none yet (the thesis's lab,
+   Ch. 7.3.1, Algorithm 2).
+3. **Absolute plausibility** (:mod:`.plausibility`, counted): raw values within
+   the plausible volume's radius and one turn, checked before any conversion;
+   then the NED position inside the plausible volume (flight volume + margin) and
+   a unit quaternion. At start-up and after a gap as at any other time.
+4. **Convert** (:mod:`.frames`) and stamp ``t = t_receive - latency_s`` (between
+   the two halves of step 3).
+5. **Streams** (:mod:`.streams`): the pose joins the stream of poses it agrees
+   with (speed / rotation-rate gate for their spacing, with slack for receive-time
+   jitter and noise) or starts one; frame numbers are kept per stream and advanced
+   only by its poses. It is passed on once its stream holds ``reanchor_poses``
+   consistent poses in a row: never one pose at start-up, after a gap longer than
+   ``reanchor_after_s`` or for a new sender.
+
+Only datagrams that carry a usable pose of the followed object ever touch the frame
+bookkeeping; other objects' items and pose-less datagrams are counted and ignored.
+No arithmetic on a received number before it is known to be finite and bounded,
+so no datagram can make numpy warn (issue 14).
 
 Datagrams that stop are visible in :class:`ViconHealth` (rate, time since the
 last pose), and the rate leaving its band is logged by :class:`RateMonitor`.
@@ -34,7 +38,6 @@ import math
 from types import MappingProxyType
 from typing import TYPE_CHECKING, TypedDict
 
-import numpy as np
 import numpy.typing as npt
 import structlog
 
@@ -47,9 +50,11 @@ from groundstation.vicon.frames import (
     FrameConversion,
 )
 from groundstation.vicon.health import RateMonitor, ViconHealth
+from groundstation.vicon.plausibility import DEFAULT_VOLUME, POSITION, Box, Plausibility
+from groundstation.vicon.streams import Gate, Streams
 
 if TYPE_CHECKING:  # config is only needed by from_config; no import cycle at run time
-    from groundstation.config import ViconConfig
+    from groundstation.config import SafetyConfig, ViconConfig
 
 MAX_RATE_FACTOR = 1.2
 """from_config: warn above expected_rate_hz * 1.2 (a faster stream is misconfigured)."""
@@ -65,22 +70,27 @@ class FilterOptions(TypedDict, total=False):
     position_slack: float
     angle_slack: float
     reanchor_after_s: float
+    reanchor_poses: int
+    plausible_volume: Box
     rate_window_s: float
     min_rate_hz: float
     max_rate_hz: float
     warn_interval_s: float
 
 
-def filter_options(config: ViconConfig) -> FilterOptions:
-    """The :class:`FilterOptions` a ``vicon:`` configuration section asks for.
+def filter_options(config: ViconConfig, safety: SafetyConfig) -> FilterOptions:
+    """The :class:`FilterOptions` the ``vicon:`` and ``safety:`` sections ask for.
 
-    max_rate_hz is not configured: it is ``MAX_RATE_FACTOR * expected_rate_hz``.
+    max_rate_hz is not configured: it is ``MAX_RATE_FACTOR * expected_rate_hz``; the
+    plausible volume is the flight volume grown by ``vicon.plausibility_margin_m``.
     """
     return FilterOptions(
         restart_silence_s=config.restart_silence_s,
         restart_backward_frames=config.restart_backjump_frames,
         max_speed=config.max_speed_m_s,
         max_rotation_rate=config.max_rotation_rate_rad_s,
+        reanchor_poses=config.reanchor_poses,
+        plausible_volume=config.plausible_volume(safety),
         min_rate_hz=config.min_rate_hz,
         max_rate_hz=MAX_RATE_FACTOR * config.expected_rate_hz,
     )
@@ -100,7 +110,10 @@ class PoseFilter:
     max_rotation_rate : plausibility limit on the implied rotation rate [rad/s]
     position_slack : position jump always allowed [m]
     angle_slack : rotation always allowed [rad]
-    reanchor_after_s : accept any pose this long after the last accepted one [s]
+    reanchor_after_s : a link between two poses of a stream longer than this is a gap [s]
+    reanchor_poses : consistent poses in a row before a stream's poses pass (>= 2)
+    plausible_volume : where a pose can be, NED [m] ((x_min, x_max), (y_min, y_max),
+        (z_min, z_max)); default: the configuration's flight volume grown by its margin
     rate_window_s, min_rate_hz, max_rate_hz, warn_interval_s : see :class:`RateMonitor`
     logger : structlog logger for the rate warning
     """
@@ -119,6 +132,8 @@ class PoseFilter:
         position_slack: float = 0.02,
         angle_slack: float = 0.05,
         reanchor_after_s: float = 0.5,
+        reanchor_poses: int = 3,
+        plausible_volume: Box = DEFAULT_VOLUME,
         rate_window_s: float = 1.0,
         min_rate_hz: float = 8.0,
         max_rate_hz: float = 120.0,
@@ -142,10 +157,13 @@ class PoseFilter:
         ]
         if not object_name:
             problems.append(("object_name", object_name, "non-empty"))
+        if not (isinstance(reanchor_poses, int) and reanchor_poses >= 2):
+            problems.append(("reanchor_poses", reanchor_poses, "an integer >= 2: never one pose"))
         if problems:
             raise ConfigError("invalid Vicon parameters", problems)
         self.object_name = object_name
         self.frames = FrameConversion.create(world_to_ned, body_to_object)
+        self.plausibility = Plausibility.create(plausible_volume)
         self.latency_s = latency_s
         self.restart_silence_s = restart_silence_s
         self.restart_backward_frames = restart_backward_frames
@@ -154,6 +172,7 @@ class PoseFilter:
         self.position_slack = position_slack
         self.angle_slack = angle_slack
         self.reanchor_after_s = reanchor_after_s
+        self.reanchor_poses = reanchor_poses
         self.decoder = DatagramDecoder()
         self.rate = RateMonitor(
             window_s=rate_window_s,
@@ -162,26 +181,28 @@ class PoseFilter:
             warn_interval_s=warn_interval_s,
             logger=logger,
         )
-        self._last_frame: int | None = None
-        self._t_last_frame = -math.inf
-        self._last_translation: tuple[float, float, float] | None = None
-        self._anchor: Pose | None = None
-        self.frames_dropped = self.duplicates = self.reordered = self.restarts = 0
+        self.streams = Streams(
+            Gate(max_speed, max_rotation_rate, position_slack, angle_slack),
+            confirm=reanchor_poses, gap_s=reanchor_after_s, silence_s=restart_silence_s,
+            backward_frames=restart_backward_frames, max_rate_hz=max_rate_hz,
+        )
         self.lost_missing = self.lost_zero = self.lost_held_identity = self.non_finite = 0
-        self.outliers = self.reanchors = self.poses = 0
+        self.implausible_position = self.implausible_rotation = self.poses = 0
 
     @classmethod
     def from_config(
-        cls, config: ViconConfig, logger: structlog.typing.FilteringBoundLogger | None = None
+        cls, config: ViconConfig, safety: SafetyConfig,
+        logger: structlog.typing.FilteringBoundLogger | None = None,
     ) -> PoseFilter:
-        """Build from the ``vicon:`` configuration section (see :func:`filter_options`)."""
+        """Build from the ``vicon:`` section, with the flight volume of the ``safety:``
+        section (see :func:`filter_options`)."""
         return cls(
             config.object_name,
             world_to_ned=config.world_to_ned.as_matrix(),
             body_to_object=config.body_to_object.as_matrix(),
             latency_s=config.latency_s,
             logger=logger,
-            **filter_options(config),
+            **filter_options(config, safety),
         )
 
     def process(self, datagram: bytes | bytearray | memoryview, t_receive: float) -> Pose | None:
@@ -193,7 +214,7 @@ class PoseFilter:
         """
         result = self.decoder.decode(datagram)
         pose = None
-        if not isinstance(result, BadDatagram) and self._accept_frame(result.frame, t_receive):
+        if not isinstance(result, BadDatagram):
             pose = self._measure(result, t_receive)
         self.rate.check(t_receive)
         return pose
@@ -212,6 +233,7 @@ class PoseFilter:
         datagrams stop arriving altogether.
         """
         rate = self.rate.check(now)
+        streams = self.streams
         return ViconHealth(
             rate_hz=rate,
             rate_in_band=self.rate.in_band,
@@ -220,51 +242,43 @@ class PoseFilter:
             poses=self.poses,
             rejected=MappingProxyType(dict(self.decoder.rejected)),
             skipped_items=self.decoder.skipped_items,
-            frames_dropped=self.frames_dropped,
-            duplicates=self.duplicates,
-            reordered=self.reordered,
-            restarts=self.restarts,
+            frames_dropped=streams.frames_dropped,
+            duplicates=streams.duplicates,
+            reordered=streams.reordered,
+            restarts=streams.restarts,
             lost_missing=self.lost_missing,
             lost_zero=self.lost_zero,
             lost_held_identity=self.lost_held_identity,
             non_finite=self.non_finite,
-            outliers=self.outliers,
-            reanchors=self.reanchors,
+            outliers=streams.outliers,
+            reanchors=streams.reanchors,
             rate_warnings=self.rate.warnings,
+            implausible_position=self.implausible_position,
+            implausible_rotation=self.implausible_rotation,
+            unconfirmed=streams.unconfirmed,
         )
 
-    def _accept_frame(self, frame: int, t: float) -> bool:
-        """Frame-number bookkeeping; True if the datagram is new (or a restart)."""
-        last = self._last_frame
-        if last is not None and frame <= last:
-            silent = t - self._t_last_frame > self.restart_silence_s
-            if not silent and last - frame <= self.restart_backward_frames:
-                if frame == last:
-                    self.duplicates += 1
-                else:
-                    self.reordered += 1
-                return False
-            self.restarts += 1
-        elif last is not None:
-            self.frames_dropped += frame - last - 1
-        self._last_frame = frame
-        self._t_last_frame = t
-        return True
-
     def _measure(self, frame: ViconFrame, t_receive: float) -> Pose | None:
-        """Lost-tracking checks, conversion and plausibility gate for one frame."""
+        """Lost-tracking and plausibility checks, conversion and streams for one frame."""
         obj = frame.find(self.object_name)
         if obj is None:
             self.lost_missing += 1
             return None
         if self._is_lost(obj):
             return None
-        position, quaternion = self.frames.to_ned(obj.translation, obj.rotation)
-        pose = Pose(t_receive - self.latency_s, position, quaternion, frame.frame)
-        if not self._plausible(pose):
-            self.outliers += 1
+        reason = self.plausibility.raw(obj.translation, obj.rotation)
+        if reason is None:
+            position, quaternion = self.frames.to_ned(obj.translation, obj.rotation)
+            reason = self.plausibility.converted(position, quaternion)
+        if reason is not None:
+            if reason == POSITION:
+                self.implausible_position += 1
+            else:
+                self.implausible_rotation += 1
             return None
-        self._anchor = pose
+        pose = Pose(t_receive - self.latency_s, position, quaternion, frame.frame)
+        if not self.streams.offer(pose, obj.translation):
+            return None
         self.poses += 1
         self.rate.record(t_receive)
         return pose
@@ -276,32 +290,12 @@ class PoseFilter:
         if not all(map(math.isfinite, (x, y, z, rx, ry, rz))):
             self.non_finite += 1
             return True
-        held = self._last_translation
-        self._last_translation = obj.translation
         if rx != 0.0 or ry != 0.0 or rz != 0.0:
             return False
         if x == 0.0 and y == 0.0 and z == 0.0:
             self.lost_zero += 1
             return True
-        if held is None or held == obj.translation:
+        if self.streams.held(obj.translation):
             self.lost_held_identity += 1
-            return True
-        return False
-
-    def _plausible(self, pose: Pose) -> bool:
-        """Speed / rotation-rate gate against the last accepted pose (see module doc)."""
-        anchor = self._anchor
-        if anchor is None:
-            return True
-        dt = max(pose.t - anchor.t, 0.0)
-        jump = float(np.linalg.norm(pose.position - anchor.position))
-        cos_half = min(abs(float(np.dot(pose.quaternion, anchor.quaternion))), 1.0)
-        angle = 2.0 * math.acos(cos_half)
-        max_jump = self.max_speed * dt + self.position_slack
-        max_angle = self.max_rotation_rate * dt + self.angle_slack
-        if jump <= max_jump and angle <= max_angle:
-            return True
-        if dt > self.reanchor_after_s:
-            self.reanchors += 1
             return True
         return False
