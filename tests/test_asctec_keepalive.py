@@ -115,3 +115,23 @@ def test_unsafe_parameters_are_refused(rate: float, stale: float) -> None:
     # A period of 100 ms or more would let the 100 ms watchdog fire between commands.
     with pytest.raises(ConfigError):
         CommandSchedule(command_rate=rate, stale_after=stale)
+
+
+def test_slack_lets_a_jittering_loop_send_its_own_commands() -> None:
+    """A loop at 50 Hz whose COMMANDs follow jittering DATA frames (20 ms +- 2 ms) raced
+    the keep-alive, which then wrote a copy just before the loop's own; with one DATA
+    period (10 ms) of slack the keep-alive writes only for a loop that missed a tick."""
+    jitter = [0.002 * ((-1) ** k) for k in range(50)]
+    loop_times = [0.02 * k + j for k, j in enumerate(jitter, start=1)]
+    racing = CommandSchedule(command_rate=50.0)
+    assert any(s == "keepalive" for _, _, s in simulate(racing, loop_times, t_end=1.0))
+    slack = CommandSchedule(command_rate=50.0, slack=0.01)
+    writes = simulate(slack, [0.0, *loop_times], t_end=1.0)
+    assert [s for _, _, s in writes] == ["loop"] * 51
+    silent = CommandSchedule(command_rate=50.0, slack=0.01)
+    writes = simulate(silent, [0.0, 0.02, 0.04], t_end=0.2)
+    keepalive = [t for t, _, s in writes if s == "keepalive"]
+    assert keepalive[0] == pytest.approx(0.07) and max(
+        b - a for a, b in itertools.pairwise(t for t, _, _ in writes)) == pytest.approx(0.03)
+    with pytest.raises(ConfigError):
+        CommandSchedule(command_rate=20.0, slack=0.05)  # 100 ms: the watchdog itself

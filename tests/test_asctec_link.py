@@ -118,14 +118,46 @@ def test_data_frames_arrive_with_receive_times(vehicle: Vehicle) -> None:
 def test_close_sends_a_final_mask_0_command_and_is_idempotent(vehicle: Vehicle) -> None:
     link = open_link(vehicle)
     link.send(ConfigMsg(0x07, 10))
+    flying = CommandMsg(thrust=2000, ctrl=0x0F)
+    link.send(flying)
+    assert link.flew
     link.close()
     link.close()
-    assert vehicle.read_until(lambda m: len(m) >= 2) == [ConfigMsg(0x07, 10), RELEASE]
-    assert link.stats().commands_sent == 1
+    assert vehicle.read_until(lambda m: len(m) >= 3) == [ConfigMsg(0x07, 10), flying, RELEASE]
+    assert link.stats().commands_sent == 2
     with pytest.raises(LinkError, match="closed"):
         link.get(0.0)
     with pytest.raises(LinkError, match="closed"):
         link.send(RELEASE)
+
+
+def test_a_link_that_never_flew_writes_nothing_on_its_way_out(vehicle: Vehicle) -> None:
+    """Issue 14 item 7: a ground station that never commanded the vehicle (never a
+    non-zero ctrl mask) must not send ctrl mask 0 when it exits: the vehicle may be in the
+    air under another ground station."""
+    link = open_link(vehicle)
+    link.send(ConfigMsg(0x07, 10))
+    link.send(RELEASE)  # mask 0 while not flying (PREFLIGHT) does not make it a pilot
+    assert not link.flew
+    link.close()
+    assert vehicle.read_until(lambda m: len(m) >= 2) == [ConfigMsg(0x07, 10), RELEASE]
+    time.sleep(0.1)  # nothing else arrives
+    assert vehicle.read_until(lambda m: True) == [ConfigMsg(0x07, 10), RELEASE]
+
+
+def test_a_second_link_on_the_same_port_is_refused_before_writing(vehicle: Vehicle) -> None:
+    """The port is opened exclusively (flock): a second ground station gets a LinkError
+    that says the port is in use, and the vehicle receives nothing from it."""
+    first = open_link(vehicle)
+    try:
+        with pytest.raises(LinkError, match="in use"):
+            SerialLink(vehicle.path)
+        first.send(ConfigMsg(0x07, 10))
+        assert vehicle.read_until(lambda m: len(m) >= 1) == [ConfigMsg(0x07, 10)]
+    finally:
+        first.close()
+    second = SerialLink(vehicle.path)  # free again once the first has closed it
+    second.close()
 
 
 def test_concurrent_writes_are_serialised(vehicle: Vehicle) -> None:

@@ -2,9 +2,11 @@
 
 The X-3D hands every channel back to the pilot when no valid COMMAND has
 arrived for 100 ms (spec section 4). While the link is *armed*, a COMMAND must
-therefore go out at least every ``1 / command_rate`` seconds whatever the
-control loop does. :class:`CommandSchedule` decides, given the time, whether
-the keep-alive must write and what:
+therefore go out at least every ``1 / command_rate + slack`` seconds whatever the
+control loop does. The slack lets a loop whose COMMANDs are a little late (they
+follow the DATA frames, which jitter) send them itself instead of racing a
+keep-alive copy onto the wire just before its own. :class:`CommandSchedule`
+decides, given the time, whether the keep-alive must write and what:
 
 * the loop's last command, while it is fresh (written less than
   ``stale_after`` seconds ago);
@@ -45,6 +47,8 @@ class CommandSchedule:
         shorter than the 100 ms watchdog (rate > 10 Hz).
     stale_after : age of the loop's last command after which the keep-alive
         sends ctrl mask 0 instead [s] (> 0).
+    slack : the keep-alive writes only when no COMMAND went out for
+        ``1 / command_rate + slack`` [s] (>= 0; the sum must stay under the watchdog).
     history : number of recent COMMAND write times kept.
     logger : structlog logger for gap warnings.
     """
@@ -54,6 +58,7 @@ class CommandSchedule:
         *,
         command_rate: float,
         stale_after: float = 0.25,
+        slack: float = 0.0,
         history: int = 256,
         logger: structlog.typing.FilteringBoundLogger | None = None,
     ) -> None:
@@ -61,7 +66,11 @@ class CommandSchedule:
             raise ConfigError(f"command_rate must exceed 10 Hz (watchdog), got {command_rate!r}")
         if not stale_after > 0.0:
             raise ConfigError(f"stale_after must be > 0 s, got {stale_after!r}")
+        if not (slack >= 0.0 and 1.0 / command_rate + slack < WATCHDOG_S):
+            raise ConfigError(f"slack must be >= 0 s and leave the keep-alive period under "
+                              f"the watchdog, got {slack!r}")
         self.period = 1.0 / command_rate
+        self.slack = float(slack)
         self.stale_after = float(stale_after)
         self._log = logger if logger is not None else structlog.get_logger("groundstation.asctec")
         self._armed_at: float | None = None
@@ -101,7 +110,7 @@ class CommandSchedule:
             return None
         if self._last_write is None:
             return self._armed_at
-        return max(self._armed_at, self._last_write + self.period)
+        return max(self._armed_at, self._last_write + self.period + self.slack)
 
     def due(self, t: float) -> CommandMsg | None:
         """The COMMAND the keep-alive must write at ``t``, or None if none is due yet.

@@ -2,7 +2,10 @@
 
 :class:`SerialLink` opens any pyserial URL (``serial.serial_for_url``): a device
 such as ``/dev/ttyUSB0``, a pty slave path (the virtual X-3D), or ``loop://``.
-A reader thread feeds a :class:`~groundstation.asctec.decoder.StreamDecoder`
+The port is opened exclusively (pyserial's ``exclusive=True``: an ``flock`` on POSIX),
+so a second ground station cannot open a port a flight is using; it gets a
+:class:`~groundstation.errors.LinkError` saying the port is in use, and has written
+nothing. A reader thread feeds a :class:`~groundstation.asctec.decoder.StreamDecoder`
 and queues every DATA message with its monotonic receive time
 (``time.monotonic()`` when its last chunk was read) in a bounded queue that
 drops the oldest sample when full. Writes are serialised by one lock.
@@ -15,11 +18,14 @@ the threads never die silently.
 While armed (:meth:`arm`), a sender thread guarantees a COMMAND at least every
 ``1 / command_rate`` s (see :mod:`groundstation.asctec.keepalive` for what it
 sends). :meth:`close` is idempotent: it stops the threads, sends a final
-COMMAND with ctrl mask 0 and closes the port.
+COMMAND with ctrl mask 0 if this link ever sent a COMMAND with a non-zero mask
+(:attr:`SerialLink.flew`; a link that never flew the vehicle writes nothing on its way
+out: the vehicle may be another ground station's), and closes the port.
 """
 
 from __future__ import annotations
 
+import errno
 import threading
 import time
 from collections import deque
@@ -32,7 +38,7 @@ import structlog
 
 from groundstation.asctec.crc import DEFAULT_PROFILE, profile_init
 from groundstation.asctec.decoder import StreamDecoder, encode_frame
-from groundstation.asctec.keepalive import CommandSchedule
+from groundstation.asctec.keepalive import GAP_WARNING_S, CommandSchedule
 from groundstation.asctec.messages import CommandMsg, DataMsg, Message
 from groundstation.asctec.stats import DataStreamMonitor, LinkStats
 from groundstation.errors import ConfigError, LinkError
@@ -63,12 +69,17 @@ def _link_error(message: str, cause: BaseException) -> LinkError:
 
 
 def _open_port(url: str, baudrate: int, read_timeout: float, write_timeout: float) -> Any:
-    """Open ``url`` with pyserial (8N1, no flow control); LinkError if it fails."""
+    """Open ``url`` exclusively with pyserial (8N1, no flow control); LinkError if it fails
+    (saying "in use" when another process holds the port's lock)."""
     try:
         return serial.serial_for_url(
-            url, baudrate=baudrate, timeout=read_timeout, write_timeout=write_timeout
+            url, baudrate=baudrate, timeout=read_timeout, write_timeout=write_timeout,
+            exclusive=True,
         )
     except (serial.SerialException, OSError, ValueError) as exc:
+        if getattr(exc, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK):
+            raise LinkError(f"serial port {url!r} is in use by another process (is a "
+                            f"flight already running on it?): {exc}") from exc
         raise LinkError(f"cannot open serial port {url!r}: {exc}") from exc
 
 
@@ -81,6 +92,8 @@ class SerialLink:
     baudrate : line rate [baud] (8N1, no flow control).
     profile : CRC profile ("asctec", "kermit", "mcrf4xx").
     command_rate : keep-alive COMMAND rate while armed [Hz] (> 10).
+    keepalive_slack : the keep-alive writes only after ``1 / command_rate`` plus this
+        without a COMMAND [s] (see :mod:`groundstation.asctec.keepalive`).
     stale_after : keep-alive re-sends the loop's command only this long [s].
     queue_size : DATA samples held for :meth:`get`; the oldest is dropped when full.
     rate_window : window of the DATA rate measurement [s].
@@ -99,6 +112,7 @@ class SerialLink:
         baudrate: int = 57600,
         profile: str = DEFAULT_PROFILE,
         command_rate: float = 50.0,
+        keepalive_slack: float = 0.0,
         stale_after: float = 0.25,
         queue_size: int = 256,
         rate_window: float = 1.0,
@@ -111,13 +125,15 @@ class SerialLink:
         self._profile = profile
         self._decoder = StreamDecoder(profile)
         self._monitor = DataStreamMonitor(rate_window=rate_window)
-        self._schedule = CommandSchedule(command_rate=command_rate, stale_after=stale_after)
+        self._schedule = CommandSchedule(command_rate=command_rate, stale_after=stale_after,
+                                         slack=keepalive_slack)
         self._queue: deque[ReceivedData] = deque(maxlen=queue_size)
         self._cond = threading.Condition()  # guards queue, decoder, monitor, counters
         self._write_lock = threading.Lock()  # serialises writes and the schedule
         self._queue_dropped = 0
         self._bytes_out = 0
         self._error: LinkError | None = None
+        self._flew = False
         self._closed = False
         self._close_lock = threading.Lock()
         self._stop = threading.Event()
@@ -131,12 +147,22 @@ class SerialLink:
 
     @classmethod
     def from_config(cls, config: SerialConfig) -> SerialLink:
-        """A link built from the ``serial`` section of the configuration."""
+        """A link built from the ``serial`` section of the configuration.
+
+        The loop sends its COMMANDs on the DATA frames it receives, so they jitter with
+        the DATA stream; the keep-alive fills in only when the loop has missed a whole
+        DATA period (``data_period_ms`` of slack; less if the keep-alive period would
+        then exceed half the watchdog). Without the slack it raced the loop and wrote a
+        copy of the loop's command just before the loop's own: 60 of 820 COMMANDs in a
+        `gs fly --demo` flight, each a late COMMAND as the vehicle sees it."""
+        period = 1.0 / config.command_rate_hz
+        slack = max(0.0, min(config.data_period_ms / 1000.0, GAP_WARNING_S - period))
         return cls(
             config.port,
             baudrate=config.baud,
             profile=config.crc_profile,
             command_rate=config.command_rate_hz,
+            keepalive_slack=slack,
             stale_after=config.stale_command_s,
         )
 
@@ -146,6 +172,12 @@ class SerialLink:
     def error(self) -> LinkError | None:
         """The failure of a background thread, if any (the link is then unusable)."""
         return self._error
+
+    @property
+    def flew(self) -> bool:
+        """True once a COMMAND with a non-zero ctrl mask was written: only then does
+        :meth:`close` send the final mask-0 COMMAND."""
+        return self._flew
 
     @property
     def armed(self) -> bool:
@@ -178,6 +210,7 @@ class SerialLink:
         with self._write_lock:
             t = self._write(frame)
             if isinstance(msg, CommandMsg):
+                self._flew = self._flew or msg.ctrl != 0
                 self._schedule.loop_command(msg, t)
                 self._schedule.record_write(t)
 
@@ -237,7 +270,8 @@ class SerialLink:
             )
 
     def close(self) -> None:
-        """Stop the keep-alive, send a final mask-0 COMMAND, stop the reader, close the port.
+        """Stop the keep-alive, send a final mask-0 COMMAND if this link :attr:`flew` the
+        vehicle, stop the reader, close the port.
 
         Idempotent. Never raises: a failed final write is logged (the vehicle's
         watchdog then returns control to the pilot within 100 ms).
@@ -247,13 +281,14 @@ class SerialLink:
                 return
             self._closed = True
         self._stop_keepalive()
-        try:
-            with self._write_lock:
-                self._schedule.record_write(
-                    self._write(encode_frame(CommandMsg.release(), self._profile))
-                )
-        except LinkError as exc:
-            _log.warning("final mask-0 COMMAND not sent", url=self.url, error=str(exc))
+        if self._flew:
+            try:
+                with self._write_lock:
+                    self._schedule.record_write(
+                        self._write(encode_frame(CommandMsg.release(), self._profile))
+                    )
+            except LinkError as exc:
+                _log.warning("final mask-0 COMMAND not sent", url=self.url, error=str(exc))
         self._stop.set()
         cancel = getattr(self._port, "cancel_read", None)
         if cancel is not None:
