@@ -3,7 +3,9 @@
 * :class:`VirtualLab`: plant, firmware, radio and Vicon on a simulated clock,
   exchanging bytes (or messages) in-process: deterministic, faster than real time.
 * :func:`run_sim_device`: the same lab in real time on a pseudo-terminal and UDP
-  (``gs sim-device``); :class:`SimDeviceThread` runs it in a background thread.
+  (``gs sim-device``); :class:`SimDeviceThread` runs it in a background thread,
+  :class:`SimDeviceProcess` in a child process; :class:`WireRecord` is what the vehicle
+  saw of the ground station's timing.
 * :class:`LabParams` and its parts: plain parameters, or ``LabParams.from_config``.
 
 Units SI, frames NED/FRD, quaternions scalar first (see :mod:`groundstation`).
@@ -19,9 +21,16 @@ from sim_device.params import (
     PlantParams,
     ViconSimParams,
 )
-from sim_device.realtime import SimDeviceInfo, SimDeviceResult, SimDeviceThread, run_sim_device
+from sim_device.realtime import (
+    SimDeviceInfo,
+    SimDeviceProcess,
+    SimDeviceResult,
+    SimDeviceThread,
+    run_sim_device,
+)
 from sim_device.truth import TruthLog, TruthState
 from sim_device.vicon import ViconDatagram
+from sim_device.wire import WireRecord
 
 __all__ = [
     "FaultParams",
@@ -32,6 +41,7 @@ __all__ = [
     "PilotParams",
     "PlantParams",
     "SimDeviceInfo",
+    "SimDeviceProcess",
     "SimDeviceResult",
     "SimDeviceThread",
     "TruthLog",
@@ -39,5 +49,6 @@ __all__ = [
     "ViconDatagram",
     "ViconSimParams",
     "VirtualLab",
+    "WireRecord",
     "run_sim_device",
 ]

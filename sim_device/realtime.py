@@ -15,12 +15,19 @@ and the real-time modes share one plant, one firmware and one Vicon.
   time, incoming bytes are written at that time, and output is sent when its
   simulated delivery time has come; deadlines advance by the tick (no drift) and
   late ticks are counted as overruns.
+* **Wire timing.** The instant each DATA frame's last byte is written to the pty
+  and each COMMAND frame is read from it are stamped on the monotonic clock
+  (:mod:`sim_device.wire`): the ground station's DATA -> COMMAND latency and its
+  COMMAND gaps as the vehicle sees them.
+* **Unplug.** Setting ``unplug`` closes the pty (a serial adapter pulled out); the
+  plant and the Vicon run on, and the vehicle's watchdog hands back to the pilot.
 * **Stop.** When ``stop`` is set, after ``duration``, or on SIGINT/SIGTERM (handlers
   are installed only when running in the main thread); the ground truth is written
-  as ``.npz`` (:mod:`sim_device.truth`) on every way out, with one extra key,
-  ``start_monotonic``: the ``time.monotonic()`` of simulated time 0 [s], so a truth
+  as ``.npz`` (:mod:`sim_device.truth`) on every way out, with extra keys:
+  ``start_monotonic``, the ``time.monotonic()`` of simulated time 0 [s], so a truth
   row's monotonic time is ``start_monotonic + t`` and the truth lines up with a
-  flight log's monotonic stamps (the evaluation's ``gs report LOG --truth``).
+  flight log's monotonic stamps (the evaluation's ``gs report LOG --truth``), and the
+  wire timing (:data:`sim_device.wire.KEYS`).
 """
 
 from __future__ import annotations
@@ -29,9 +36,13 @@ import contextlib
 import errno
 import fcntl
 import os
+import re
 import select
+import signal
 import socket
 import struct
+import subprocess
+import sys
 import termios
 import threading
 import time
@@ -47,6 +58,7 @@ import numpy as np
 
 from groundstation.loop.signals import on_stop_signals
 from sim_device.lab import LabStats, VirtualLab
+from sim_device.wire import WireRecord, WireTiming
 
 if TYPE_CHECKING:
     from groundstation.config import GroundStationConfig
@@ -77,6 +89,7 @@ class SimDeviceResult:
     overruns : ticks that started more than one tick late
     serial_dropped : DATA bytes discarded because the client was not reading
     vicon_errors : datagrams the socket refused
+    wire : DATA-out and COMMAND-in instants at the vehicle's port (:mod:`sim_device.wire`)
     """
 
     info: SimDeviceInfo
@@ -86,6 +99,7 @@ class SimDeviceResult:
     overruns: int
     serial_dropped: int
     vicon_errors: int
+    wire: WireRecord
 
     @property
     def cpu_share(self) -> float:
@@ -145,10 +159,18 @@ class _Pty:
             sent = 0
         self.dropped += len(data) - sent
 
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` ran (the adapter is unplugged)."""
+        return self.master < 0
+
     def close(self) -> None:
+        """Close both ends (idempotent): the client's reads fail from now on."""
         for fd in (self.master, self.slave):
-            with contextlib.suppress(OSError):
-                os.close(fd)
+            if fd >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        self.master = self.slave = -1
 
 
 def run_sim_device(
@@ -160,6 +182,7 @@ def run_sim_device(
     announce: Callable[[str], None] | None = print,
     duration: float | None = None,
     tick: float | None = None,
+    unplug: threading.Event | None = None,
 ) -> SimDeviceResult:
     """Run the virtual X-3D (pty) and virtual Vicon (UDP) in real time until stopped.
 
@@ -172,6 +195,7 @@ def run_sim_device(
     announce : where the human-readable lines go (None = silent)
     duration : stop after this many wall seconds (None = until stopped)
     tick : scheduler period [s] (default the plant step)
+    unplug : set it to close the pty while the lab runs on (a pulled serial adapter)
 
     Returns a :class:`SimDeviceResult`; the truth file is written on every way out.
     """
@@ -185,6 +209,7 @@ def run_sim_device(
     pty = _Pty()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     counters = {"overruns": 0, "vicon_errors": 0}
+    wire = WireTiming(lab.params.link.crc_profile)
     wall0, cpu0 = time.monotonic(), time.process_time()
     start = wall0  # simulated time 0 on the monotonic clock; reset when the clock starts
     try:
@@ -195,48 +220,68 @@ def run_sim_device(
             on_ready(info)
         with on_stop_signals(lambda _sig: stop.set()):
             start = time.monotonic()
-            _loop(lab, pty, sock, target, stop, tick, duration, counters, start)
+            _loop(lab, _Io(pty, sock, target, wire, unplug), stop, tick, duration, counters,
+                  start)
     finally:
         wall, cpu = time.monotonic() - wall0, time.process_time() - cpu0
         sock.close()
         pty.close()
         saved = lab.truth_log.save(info_path)
-        _add_start_monotonic(saved, start)
+        _add_arrays(saved, {"start_monotonic": np.array(start, dtype=float), **wire.arrays()})
         say(f"ground truth ({len(lab.truth_log)} rows) written to {saved}")
     return SimDeviceResult(info, lab.stats(), wall, cpu, counters["overruns"], pty.dropped,
-                           counters["vicon_errors"])
+                           counters["vicon_errors"], wire.record())
 
 
-def _add_start_monotonic(path: Path, start: float) -> None:
-    """Add ``start_monotonic`` (the monotonic time of simulated time 0 [s]) to a saved
-    truth ``.npz``: one more ``.npy`` member in the archive, exactly as ``np.savez`` writes
-    each array, so ``np.load(path)["start_monotonic"]`` reads it."""
-    with zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as archive, \
-            archive.open("start_monotonic.npy", "w") as member:
-        np.lib.format.write_array(member, np.array(start, dtype=float))
+def _add_arrays(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    """Add ``arrays`` to a saved truth ``.npz``: one more ``.npy`` member each, exactly as
+    ``np.savez`` writes them, so ``np.load(path)["start_monotonic"]`` reads it."""
+    with zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as archive:
+        for name, value in arrays.items():
+            with archive.open(f"{name}.npy", "w") as member:
+                np.lib.format.write_array(member, value)
 
 
-def _loop(lab: VirtualLab, pty: _Pty, sock: socket.socket, target: tuple[str, int],
-          stop: threading.Event, tick: float, duration: float | None,
-          counters: dict[str, int], start: float) -> None:
+@dataclass
+class _Io:
+    """The real-time loop's ports: the pty, the Vicon socket and the wire timing."""
+
+    pty: _Pty
+    sock: socket.socket
+    target: tuple[str, int]
+    wire: WireTiming
+    unplug: threading.Event | None
+
+
+def _loop(lab: VirtualLab, io: _Io, stop: threading.Event, tick: float,
+          duration: float | None, counters: dict[str, int], start: float) -> None:
     """The real-time loop: advance to the wall clock, exchange bytes, sleep to the next tick.
 
-    start : ``time.monotonic()`` of simulated time 0 [s].
+    start : ``time.monotonic()`` of simulated time 0 [s]. Bytes from the ground station
+    are read (and stamped) before the lab advances, and handed to the lab after it, as
+    they always were: the stamp is the instant the ground station's write woke the loop.
     """
     deadline = tick
     end = float("inf") if duration is None else duration
+    pty, wire = io.pty, io.wire
     while not stop.is_set():
         now = time.monotonic() - start
         if now >= end:
             break
+        if io.unplug is not None and io.unplug.is_set() and not pty.closed:
+            pty.close()
+        incoming = b"" if pty.closed else pty.read()
+        if incoming:
+            wire.received(time.monotonic(), incoming)
         for _, frame in lab.advance_to(now):
-            pty.write(frame)
+            if not pty.closed:
+                pty.write(frame)
+                wire.data_sent(time.monotonic())
         for dgram in lab.vicon_datagrams():
             try:
-                sock.sendto(dgram.data, target)
+                io.sock.sendto(dgram.data, io.target)
             except OSError:
                 counters["vicon_errors"] += 1
-        incoming = pty.read()
         if incoming:
             lab.write(incoming)
         if now > deadline + tick:
@@ -244,7 +289,11 @@ def _loop(lab: VirtualLab, pty: _Pty, sock: socket.socket, target: tuple[str, in
             deadline = now
         while deadline <= now:
             deadline += tick
-        select.select([pty.master], [], [], max(0.0, min(deadline, end) - now))
+        timeout = max(0.0, min(deadline, end) - now)
+        if pty.closed:
+            stop.wait(timeout)
+        else:
+            select.select([pty.master], [], [], timeout)
 
 
 class SimDeviceThread:
@@ -262,6 +311,7 @@ class SimDeviceThread:
         self._truth_file = truth_file
         self._timeout = timeout
         self._stop = threading.Event()
+        self._unplug = threading.Event()
         self._ready = threading.Event()
         self._info: SimDeviceInfo | None = None
         self.result: SimDeviceResult | None = None
@@ -275,6 +325,10 @@ class SimDeviceThread:
             raise RuntimeError("the virtual lab is not running")
         return self._info
 
+    def unplug(self) -> None:
+        """Pull the serial adapter: the pty closes at the next tick, the lab runs on."""
+        self._unplug.set()
+
     def _on_ready(self, info: SimDeviceInfo) -> None:
         self._info = info
         self._ready.set()
@@ -282,7 +336,8 @@ class SimDeviceThread:
     def _run(self) -> None:
         try:
             self.result = run_sim_device(self._config, self._stop, truth_file=self._truth_file,
-                                         on_ready=self._on_ready, announce=None)
+                                         on_ready=self._on_ready, announce=None,
+                                         unplug=self._unplug)
         except BaseException as exc:  # handed to the caller's thread in __exit__
             self.error = exc
         finally:
@@ -300,3 +355,64 @@ class SimDeviceThread:
         self._thread.join(self._timeout)
         if self.error is not None:
             raise RuntimeError("the virtual lab failed") from self.error
+
+
+class SimDeviceProcess:
+    """Run ``gs sim-device`` in a child process for a ``with`` block.
+
+    The virtual vehicle then keeps its own interpreter: a pause of the ground station's
+    process (its garbage collector, a loaded core) does not stall the vehicle's clock,
+    so the vehicle's watchdog and the wire timing see the ground station as a real
+    X-3D would. ``with SimDeviceProcess(config_file, truth_file) as dev:`` returns once
+    the pty exists (``dev.pty_path``); leaving the block stops the child with SIGINT,
+    waits for its truth file and loads the wire record into ``dev.wire``. The child
+    has a session of its own: a Ctrl-C at the terminal reaches the ground station
+    (which lands), not the vehicle.
+
+    config_file : a YAML configuration with a ``sim`` section and the Vicon port
+    truth_file : where the child writes the ground truth (.npz)
+    gs : the ``gs`` executable (default: next to this interpreter, else this
+        interpreter running the CLI)
+    """
+
+    def __init__(self, config_file: str | Path, truth_file: str | Path, *,
+                 gs: str | Path | None = None, timeout: float = 30.0) -> None:
+        exe = Path(gs) if gs is not None else Path(sys.executable).parent / "gs"
+        command = [str(exe)] if exe.exists() else [
+            sys.executable, "-c", "from groundstation.cli import app; app()"]
+        self.truth_file = Path(truth_file)
+        self._timeout = timeout
+        self._args = [*command, "sim-device", "--config", str(config_file),
+                      "--truth-file", str(self.truth_file)]
+        self._child: subprocess.Popen[str] | None = None
+        self.pty_path = ""
+        self.output = ""
+        """What the child printed after its first line (read when the block ends)."""
+        self.wire: WireRecord | None = None
+
+    def __enter__(self) -> SimDeviceProcess:
+        self._child = subprocess.Popen(self._args, stdout=subprocess.PIPE, text=True,
+                                       start_new_session=True)
+        assert self._child.stdout is not None
+        line = self._child.stdout.readline()
+        match = re.search(r"on (/dev/\S+) ", line)
+        if match is None:
+            self.__exit__(None, None, None)
+            raise RuntimeError(f"gs sim-device did not start: {line!r}")
+        self.pty_path = match.group(1)
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        child = self._child
+        if child is None:
+            return
+        self._child = None
+        if child.poll() is None:
+            child.send_signal(signal.SIGINT)
+        try:
+            self.output = child.communicate(timeout=self._timeout)[0]
+        except subprocess.TimeoutExpired:
+            child.kill()
+            self.output = child.communicate()[0]
+        if self.truth_file.exists():
+            self.wire = WireRecord.load(self.truth_file)

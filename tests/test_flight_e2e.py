@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.config import apply_overrides, load_config
+from groundstation.config import apply_overrides, dump_config, load_config
 from groundstation.loop.daemon import FlightDaemon, FlightSummary
 from groundstation.loop.recorder import read_flight
 from groundstation.loop.supervisor import State
 from groundstation.telemetry.client import TelemetryClient
 from groundstation.telemetry.control import send_request
-from sim_device.realtime import SimDeviceThread
+from sim_device.realtime import SimDeviceProcess
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -41,8 +41,13 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
         "telemetry.control_endpoint": "tcp://127.0.0.1:*",
         "sim.truth_file": str(tmp_path / "truth.npz"),
     })
-    with SimDeviceThread(cfg) as device:
-        cfg = apply_overrides(cfg, {"serial.port": device.info.pty_path})
+    # The virtual vehicle in its own process: a stall of this one (a loaded machine)
+    # cannot stop the vehicle's clock and fake a watchdog expiry, which would make the
+    # flight end as a failsafe.
+    cfg_file = tmp_path / "lab.yaml"
+    cfg_file.write_text(dump_config(cfg), encoding="utf-8")
+    with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as device:
+        cfg = apply_overrides(cfg, {"serial.port": device.pty_path})
         daemon = FlightDaemon(cfg, duration_s=3.0)
         out: dict[str, FlightSummary] = {}
         runner = threading.Thread(target=lambda: out.setdefault("s", daemon.run()))
@@ -79,6 +84,12 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     assert handed == {"ok": True, "auto": ["pitch", "roll", "thrust"], "state": "TRACK"}
     assert back == {"ok": True, "auto": ["pitch", "roll", "yaw", "thrust"], "state": "TRACK"}
     assert topics["state"]["supervisor"]["name"] in {s.name for s in State}  # type: ignore[index]
+    # The vehicle's own report is published: its battery (11.8 V, drooping slowly) and
+    # that it applies all four channels while tracking.
+    vehicle = topics["state"]["vehicle"]
+    assert isinstance(vehicle, dict)
+    assert 11.7 < vehicle["battery_v"] <= 11.8 and vehicle["serial_active"]
+    assert vehicle["applied_mask"] == 0xF and vehicle["pilot_enabled"]
 
     # Took off, hovered, landed and handed back; exit code 0 for `gs fly`.
     assert summary.final_state is State.DONE and summary.success, summary.transitions
@@ -98,6 +109,12 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     assert len(rows) >= 0.9 * summary.ticks
     assert "sim:" in config_text and meta["version"]
     assert np.all(np.diff(rows["t"]) > 0)
+    assert np.all((rows["battery_v"] > 11.7) & (rows["battery_v"] <= 11.8))
+    tracking = rows["state"] == int(State.TRACK)
+    assert np.all(rows["vehicle_flags"][tracking] & 0x01)  # the X-3D applied our commands
+    assert meta["outcome"] == {"outcome": "COMPLETED", "exit_code": 0, "final_state": "DONE",
+                               "reason": summary.reason, "failsafe_transitions": [],
+                               "events": []}
     assert summary.commands_sent > 0.4 * summary.ticks  # 50 Hz commands on 100 Hz ticks
     # The handover reached the wire: about 0.5 s of COMMANDs without the yaw bit (25 at
     # 50 Hz; the bound leaves room for a loaded machine), then all four channels again.

@@ -233,3 +233,75 @@ def test_channels_handed_to_the_pilot_and_back_at_run_time(tmp_path: Path) -> No
     blend[first:first + 95] = True
     assert not rows["cmd_automatic"][blend & sent].any()
     assert rows["cmd_automatic"][after][sent[after]].all()
+
+
+def test_low_battery_lands_after_its_grace_time(tmp_path: Path) -> None:
+    """Issue 14: the battery voltage the X-3D reports (STATUS) is logged, and a battery
+    below safety.battery_land_v for safety.battery_grace_s lands the vehicle. The virtual
+    battery droops linearly here from 11.80 V by 0.15 % a second: 11.70 V at 5.6 s, after
+    take-off (which starts at ~3.2 s)."""
+    cfg = sim_config(**{"sim.battery_droop_time_s": 20.0, "safety.battery_land_v": 11.70,
+                        "safety.battery_grace_s": 2.0})
+    result = run_logged(cfg, tmp_path, 30.0, [])
+    land = next(tr for tr in result.transitions if tr.new is State.LAND)
+    assert "battery" in land.reason and land.failsafe, land
+    assert 5.6 + 2.0 <= land.t < 5.6 + 2.0 + 0.2, land.t  # crossed, then the grace time
+    assert result.final_state is State.DONE and on_the_ground(result)
+    assert not result.success  # a failsafe landing is not a normal end (exit code 1)
+    (log,) = tmp_path.iterdir()
+    rows, _, _ = read_flight(log)
+    volts = rows["battery_v"]
+    assert volts[0] == pytest.approx(11.8, abs=0.002)  # the STATUS block, in volts
+    k = int(np.argmax(rows["state"] == int(State.LAND)))
+    assert volts[k] < 11.70 and np.all(np.diff(volts) <= 0.0011)
+
+
+def test_a_battery_low_for_less_than_the_grace_time_does_not_land() -> None:
+    """One low sample under load (a sag) is not an empty battery."""
+    cfg = sim_config(**{"safety.battery_land_v": 11.70, "safety.battery_grace_s": 2.0})
+
+    def sag(volts: float) -> Event:
+        def event(f: InProcessFlight) -> None:
+            fw = f.lab.firmware
+            fw.params = dataclasses.replace(fw.params, battery_mv=round(1000 * volts))
+        return event
+
+    flight = InProcessFlight(cfg, duration_s=6.0)
+    result = flight.run(max_time_s=60.0, events=[(8.0, sag(11.6)), (9.5, sag(11.8)),
+                                                 (10.0, sag(11.6)), (11.9, sag(11.8))])
+    assert states(result) == [State.TAKEOFF, State.TRACK, State.LAND, State.DISARM, State.DONE]
+    assert result.success
+
+
+def test_a_watchdog_expiry_in_the_air_is_a_failsafe_event_with_its_duration(
+        tmp_path: Path) -> None:
+    """Finding 3's other half: the vehicle's watchdog expired in the air and the flight
+    still reported a normal end. Here no COMMAND reaches the vehicle for 0.15 s (a
+    ground-station pause, a radio fade): the X-3D hands the channels to the pilot for
+    ~70 ms until COMMANDs arrive again. The flight goes on, but the event is logged
+    (warning, failsafe) with its duration, recorded per tick, and the exit code is 1."""
+    def drop_commands(f: InProcessFlight) -> None:
+        f.lab.write = lambda data: None  # type: ignore[method-assign]
+
+    def restore(f: InProcessFlight) -> None:
+        del f.lab.write
+
+    from structlog.testing import capture_logs
+
+    with capture_logs() as logs:
+        result = run_logged(sim_config(), tmp_path, 6.0, [(9.0, drop_commands),
+                                                          (9.15, restore)])
+    assert result.final_state is State.DONE and on_the_ground(result)
+    assert not result.success
+    (event,) = result.core.supervisor.events
+    assert event.kind == "watchdog" and 0.03 <= event.duration_s <= 0.12, event
+    assert 9.1 <= event.t <= 9.3
+    warned = [e for e in logs if e["log_level"] == "warning" and e.get("failsafe")
+              and e.get("kind") == "watchdog"]
+    assert len(warned) == 1
+    assert warned[0]["duration_s"] == pytest.approx(event.duration_s, abs=1e-3)
+    (log,) = tmp_path.iterdir()
+    rows, _, _ = read_flight(log)
+    blip = (rows["t"] > 9.0) & (rows["t"] < 9.4) & ((rows["vehicle_flags"] & 1) == 0)
+    assert 3 <= blip.sum() <= 12
+    assert np.all(rows["vehicle_mask"][blip] == 0)

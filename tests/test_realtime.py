@@ -11,7 +11,12 @@ import pytest
 from structlog.testing import capture_logs
 
 from groundstation.config import ConfigError, validate_config
-from groundstation.loop.realtime import CPU_DMA_LATENCY, cpu_latency_request, switch_interval
+from groundstation.loop.realtime import (
+    CPU_DMA_LATENCY,
+    CollectorPacer,
+    cpu_latency_request,
+    switch_interval,
+)
 
 
 def _open_fds() -> int:
@@ -80,3 +85,60 @@ def test_config_defaults_and_errors() -> None:
         validate_config({"realtime": {"cpu_dma_latency_us": -1, "switch_interval_ms": 0}})
     paths = [path for path, _value, _reason in err.value.problems]
     assert paths == ["realtime.cpu_dma_latency_us", "realtime.switch_interval_ms"]
+
+
+def test_collector_pacer_freezes_and_runs_full_collections_only_after_a_command() -> None:
+    """Issue 14 item 3: no full collection in the middle of a tick; young ones go on."""
+    import gc
+
+    thresholds = gc.get_threshold()
+    full: list[str] = []
+
+    def watch(phase: str, info: dict[str, int]) -> None:
+        if phase == "stop" and info["generation"] == 2:
+            full.append("full")
+
+    gc.callbacks.append(watch)
+    try:
+        with CollectorPacer() as pacer:
+            assert gc.get_freeze_count() > 1000  # the start-up objects
+            full.clear()
+            keep = []
+            for k in range(200_000):  # promote plenty to the oldest generation
+                cycle: list[object] = [k]
+                cycle.append(cycle)
+                keep.append(cycle)
+                if len(keep) > 5000:
+                    keep.clear()
+            assert not full  # the interpreter started none on its own
+            assert gc.get_count()[2] >= thresholds[2]  # ... though it wanted one
+            pacer.after_command()
+            assert full == ["full"]
+            pacer.after_command()
+            assert full == ["full"]  # not due again: nothing promoted since
+        assert pacer.stats.full == 1 and pacer.stats.young > 10
+        assert 0.0 < pacer.stats.longest_full_s < 0.5
+    finally:
+        gc.callbacks.remove(watch)
+    assert gc.get_threshold() == thresholds and gc.get_freeze_count() == 0
+
+
+def test_collector_pacer_disabled_leaves_the_interpreter_alone() -> None:
+    import gc
+
+    thresholds = gc.get_threshold()
+    with CollectorPacer(enabled=False) as pacer:
+        assert gc.get_threshold() == thresholds and gc.get_freeze_count() == 0
+        pacer.after_command()
+    assert pacer.stats.full == 0
+
+
+def test_new_config_keys_defaults() -> None:
+    cfg = validate_config({})
+    assert cfg.realtime.paced_gc is True
+    assert cfg.safety.second_signal_after_s == 0.5
+    assert cfg.safety.battery_land_v == 10.5 and cfg.safety.battery_grace_s == 10.0
+    assert validate_config({"safety": {"battery_land_v": None}}).safety.battery_land_v is None
+    with pytest.raises(ConfigError) as err:
+        validate_config({"safety": {"second_signal_after_s": -1, "battery_grace_s": 0}})
+    assert "second_signal_after_s" in str(err.value) and "battery_grace_s" in str(err.value)

@@ -56,6 +56,8 @@ def make_tick(rng: np.random.Generator, k: int) -> dict[str, Any]:
             *(int(v) for v in rng.integers(-2048, 2048, 3)), int(rng.integers(0, 4097))),
         sent=bool(k % 2), state=k % 3,
         compute_time=rng.random() * 1e-3, jitter=rng.normal() * 1e-4, latency=rng.random() * 1e-2,
+        battery_v=11.8 - 1e-3 * k, vehicle_flags=int(rng.integers(0, 8)),
+        vehicle_mask=int(rng.integers(0, 16)), pilot_enabled=bool(k % 5),
     )
 
 
@@ -82,7 +84,9 @@ def expected_row(a: dict[str, Any]) -> dict[str, Any]:
         "ctrl_pitch": ctrl.pitch, "ctrl_roll": ctrl.roll, "ctrl_yaw": ctrl.yaw,
         "ctrl_thrust": ctrl.thrust,
         "state": a["state"], "compute_time": a["compute_time"], "jitter": a["jitter"],
-        "latency": a["latency"],
+        "latency": a["latency"], "battery_v": a["battery_v"],
+        "vehicle_flags": a["vehicle_flags"], "vehicle_mask": a["vehicle_mask"],
+        "pilot_enabled": a["pilot_enabled"],
     }
 
 
@@ -118,6 +122,20 @@ def test_missing_estimate_and_reference_are_nan(tmp_path: Path) -> None:
     for name in ("vicon_position", "est_position", "est_covariance_diag", "ref_velocity",
                  "ref_yaw", "vicon_t"):
         assert np.all(np.isnan(row[name])), name
+
+
+def test_without_a_status_block_the_battery_is_nan(tmp_path: Path) -> None:
+    args = make_tick(np.random.default_rng(3), 1)
+    for name in ("battery_v", "vehicle_flags", "vehicle_mask", "pilot_enabled"):
+        del args[name]
+    with FlightRecorder.create(tmp_path, CONFIG) as rec:
+        rec.append(**args)
+    data, meta, _ = read_flight(rec.directory)
+    row = data[0]
+    assert np.isnan(row["battery_v"]) and row["vehicle_flags"] == row["vehicle_mask"] == 0
+    assert row["pilot_enabled"]
+    assert meta["schema_version"] == 3
+    assert meta["units"]["battery_v"] == "V" and meta["units"]["vehicle_mask"] == "bits"
 
 
 def test_np_load_works_after_every_flush(tmp_path: Path) -> None:

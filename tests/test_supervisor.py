@@ -10,6 +10,7 @@ from structlog.testing import capture_logs
 
 from groundstation.loop.supervisor import (
     Observation,
+    Outcome,
     State,
     Supervisor,
     SupervisorLimits,
@@ -235,3 +236,112 @@ def test_the_takeoff_timeout_comes_from_the_configuration() -> None:
 
     cfg = validate_config({"safety": {"takeoff_timeout_s": 7.5}})
     assert limits_from_config(cfg).takeoff_timeout_s == 7.5
+
+
+def test_outcome_completed_stopped_and_failsafe() -> None:
+    """The outcome is `gs fly`'s exit code: 0 completed, 4 stopped on request, 1 failsafe."""
+    sup = Supervisor()
+    t = airborne(sup)
+    sup.update(obs(t + 1, trajectory_done=True, **FLYING_AT_1M))
+    sup.update(obs(t + 2, height_above_ground_m=0.01))
+    sup.update(obs(t + 2.6, height_above_ground_m=0.01))
+    sup.update(obs(t + 3.2, height_above_ground_m=0.0))
+    assert sup.state is State.DONE and sup.outcome is Outcome.COMPLETED and sup.outcome == 0
+
+    stopped = Supervisor()
+    t = airborne(stopped)
+    stopped.update(obs(t + 0.1, stop_requests=1, **FLYING_AT_1M))
+    stopped.update(obs(t + 0.2, stop_requests=2, **FLYING_AT_1M))
+    assert stopped.state is State.HANDBACK and stopped.outcome is Outcome.STOPPED
+    assert stopped.outcome == 4 and stopped.success
+    assert not any(tr.failsafe for tr in stopped.transitions)
+
+
+@pytest.mark.parametrize("change", [
+    {"position": (3.0, 0.0, -1.0)},  # geofence
+    {"tilt_rad": math.radians(50.0)},  # e.g. H-infinity over the tilt limit
+    {"vicon_age_s": 5.0},  # Vicon lost 5 s
+])
+def test_a_failsafe_landing_is_not_a_normal_end(change: dict[str, object]) -> None:
+    """Issue 14 item 5: these landings ended in DONE and counted as a normal end (exit 0)."""
+    sup = Supervisor()
+    t = airborne(sup)
+    with capture_logs() as logs:
+        assert sup.update(obs(t + 0.1, **{**FLYING_AT_1M, **change})) is State.LAND
+    sup.update(obs(t + 1.0, height_above_ground_m=0.0))
+    sup.update(obs(t + 1.6, height_above_ground_m=0.0))
+    sup.update(obs(t + 2.2, height_above_ground_m=0.0))
+    assert sup.state is State.DONE
+    assert sup.outcome is Outcome.FAILSAFE and not sup.success
+    assert [tr.failsafe for tr in sup.transitions] == [False, False, True, False, False]
+    assert [(e["log_level"], e["failsafe"]) for e in logs] == [("warning", True)]
+
+
+@pytest.mark.parametrize(("change", "state"), [
+    ({"data_age_s": 1.0}, State.LINK_LOST),
+    ({"pilot_enabled": False}, State.PILOT),
+    ({"estimator_diverged": True}, State.HANDBACK),
+])
+def test_every_global_failsafe_is_marked_and_warned(change: dict[str, object],
+                                                    state: State) -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    with capture_logs() as logs:
+        assert sup.update(obs(t + 0.1, **{**FLYING_AT_1M, **change})) is state
+    assert sup.transitions[-1].failsafe and sup.outcome is Outcome.FAILSAFE
+    assert [(e["log_level"], e["failsafe"]) for e in logs] == [("warning", True)]
+
+
+def test_a_short_watchdog_expiry_in_the_air_is_an_event_with_its_duration() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    with capture_logs() as logs:
+        assert sup.update(obs(t + 0.01, vehicle_applying=False, **FLYING_AT_1M)) is State.TRACK
+        assert sup.update(obs(t + 0.02, vehicle_applying=False, **FLYING_AT_1M)) is State.TRACK
+        assert sup.update(obs(t + 0.09, vehicle_applying=True, **FLYING_AT_1M)) is State.TRACK
+    (event,) = sup.events
+    assert event.kind == "watchdog" and event.t == t + 0.01
+    assert event.duration_s == pytest.approx(0.08)
+    assert "80 ms" in event.reason
+    assert [(e["log_level"], e["failsafe"], e["kind"], e["duration_s"]) for e in logs] == [
+        ("warning", True, "watchdog", 0.08)]
+    assert sup.outcome is Outcome.FAILSAFE  # even if the flight then completes
+
+
+def test_the_first_command_taking_effect_is_not_an_expiry() -> None:
+    """At take-off the vehicle applies nothing until the first COMMAND arrives."""
+    sup = Supervisor()
+    assert sup.update(obs(0.0, vehicle_applying=False)) is State.TAKEOFF
+    assert sup.update(obs(0.05, vehicle_applying=False)) is State.TAKEOFF
+    assert sup.update(obs(0.06, vehicle_applying=True)) is State.TAKEOFF
+    assert not sup.events
+
+
+def test_battery_below_the_limit_refuses_take_off_and_lands_after_the_grace_time() -> None:
+    limits = SupervisorLimits(battery_land_v=10.5, battery_grace_s=10.0)
+    sup = Supervisor(limits)
+    assert sup.update(obs(0.0, battery_v=10.4)) is State.PREFLIGHT
+    assert sup.preflight_failures == ["battery 10.40 V < 10.50 V"]
+    assert sup.update(obs(0.1, battery_v=11.1)) is State.TAKEOFF
+    sup.update(obs(1.0, takeoff_done=True, **FLYING_AT_1M))
+    assert sup.update(obs(2.0, battery_v=10.4, **FLYING_AT_1M)) is State.TRACK
+    assert sup.update(obs(11.9, battery_v=10.4, **FLYING_AT_1M)) is State.TRACK
+    assert sup.update(obs(12.0, battery_v=10.6, **FLYING_AT_1M)) is State.TRACK  # recovered
+    assert sup.update(obs(21.9, battery_v=10.4, **FLYING_AT_1M)) is State.TRACK  # restarts
+    with capture_logs() as logs:
+        assert sup.update(obs(31.9, battery_v=10.3, **FLYING_AT_1M)) is State.LAND
+    assert sup.transitions[-1].reason == "battery 10.30 V below 10.50 V for 10.0 s"
+    assert sup.transitions[-1].failsafe and logs[0]["log_level"] == "warning"
+    # NaN (no STATUS block) never triggers it
+    quiet = Supervisor(limits)
+    assert quiet.update(obs(0.0, battery_v=math.nan)) is State.TAKEOFF
+
+
+def test_force_ends_the_flight_as_a_failsafe() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    with capture_logs() as logs:
+        assert sup.force(t + 1, State.LINK_LOST, "serial link failed: EIO") is State.LINK_LOST
+    assert sup.terminal and sup.transitions[-1].failsafe
+    assert logs[0]["log_level"] == "warning" and logs[0]["new"] == "LINK_LOST"
+    assert sup.force(t + 2, State.ABORTED, "late") is State.LINK_LOST  # terminal stays

@@ -41,11 +41,16 @@ EST = StateEstimate(
 REF = Reference(2.0, np.array([0.5, 0.0, -1.0]), np.array([0.2, 0.0, 0.0]), yaw=0.1)
 
 
+VEHICLE = {"battery_v": 11.784, "serial_active": True, "motors_on": True, "rc_valid": True,
+           "applied_mask": 0b1111, "pilot_enabled": True}
+"""What the X-3D reports (STATUS, RC) as the daemon publishes it."""
+
+
 def snapshot() -> dict[str, dict[str, Any]]:
     return {
         "state": state_payload(state=2, state_name="TRACK", estimate=EST, reference=REF,
                                sticks=Sticks(roll=-12, pitch=30, yaw=0, thrust=2010),
-                               ctrl_mask=0b1111, sent=True),
+                               ctrl_mask=0b1111, sent=True, vehicle=VEHICLE),
         "health": health_payload(
             link={"rate_hz": 99.5, "rejected": {"crc": 2, "length": 1}, "time_since_data_s": 0.01},
             vicon={"rate_hz": 100.0, "rejected": {}, "time_since_pose_s": float("inf")},
@@ -89,6 +94,7 @@ def test_round_trip_and_schema(pub: TelemetryPublisher) -> None:
     assert state["error"]["distance"] == pytest.approx(np.sqrt(0.16 + 0.04 + 0.0025))
     assert state["command"] == {"pitch": 30, "roll": -12, "yaw": 0, "thrust": 2010,
                                 "mask": 15, "sent": True}
+    assert state["vehicle"] == VEHICLE  # the battery voltage among it [V]
     assert health["link"]["rejected"] == {"crc": 2, "length": 1}
     assert health["vicon"]["time_since_pose_s"] is None  # inf is not JSON: sent as null
     assert set(health["telemetry"]) == {"sent", "dropped", "errors"}
@@ -239,6 +245,10 @@ def test_render_shows_the_view() -> None:
     assert "x  +0.400  y  +0.200  z  -0.050 m  |e| 0.450 m" in text  # reference - estimate
     assert "99.5 Hz  rejected 3 (crc 2, length 1)" in text
     assert "thrust 2010  mask 1111  sent" in text and "rejected_updates 4" in text
+    assert "vehicle    battery  11.78 V  applies 1111  motors on  RC ok  switch on" in text
+    handed = render({**state, "vehicle": {**VEHICLE, "serial_active": False,
+                                          "applied_mask": 0}}, health)
+    assert any("applies none (pilot)" in line for line in handed)
     waiting = render(None, None)
     assert "waiting" in waiting[0] and len(waiting) == len(render(state, health))
     assert "NO DATA for 3.0 s" in render(state, health, age_s=3.0)[0]
@@ -265,7 +275,7 @@ def test_run_monitor_redraws_in_place(pub: TelemetryPublisher) -> None:
     text = out.getvalue()
     assert received > 0 and "TRACK (2)" in text
     frames = text.count("groundstation monitor")
-    assert frames >= 2 and text.count("\x1b[12F") == frames - 1  # cursor up over 12 lines
+    assert frames >= 2 and text.count("\x1b[13F") == frames - 1  # cursor up over 13 lines
 
 
 _MONITOR = textwrap.dedent("""
@@ -282,7 +292,7 @@ def test_monitor_stops_cleanly_on_ctrl_c(pub: TelemetryPublisher) -> None:
         assert proc.stdout is not None
         for _ in range(3):  # wait until the view is drawn
             assert "groundstation monitor" in proc.stdout.readline()
-            for _line in range(11):
+            for _line in range(12):
                 proc.stdout.readline()
         proc.send_signal(signal.SIGINT)
         out, _ = proc.communicate(timeout=10)

@@ -87,6 +87,7 @@ def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
         preflight_timeout_s=s.preflight_timeout_s, takeoff_timeout_s=s.takeoff_timeout_s,
         min_data_rate_hz=0.8 * 1000.0 / config.serial.data_period_ms,
         min_vicon_rate_hz=config.vicon.min_rate_hz, on_signal=s.on_signal,
+        battery_land_v=s.battery_land_v, battery_grace_s=s.battery_grace_s,
     )
 
 
@@ -106,7 +107,8 @@ class FlightCore:
                  duration_s: float | None = None) -> None:
         self.config = config
         quad = quadrotor_params(config)
-        self.ekf = estimator or Ekf(EkfParams.from_config(config.vehicle, config.estimator))
+        self.ekf = estimator or Ekf(EkfParams.from_config(config.vehicle, config.estimator,
+                                                          config.vicon, config.safety))
         self.controller = controller or controller_from_config(config)
         # built from the configuration unless given, shaped, and refused (TrajectoryError)
         # unless it is feasible and inside the volume
@@ -187,6 +189,20 @@ class FlightCore:
         return TickResult(self._command, due, state, reference, self._estimate, self._sticks,
                           self._preview, self._automatic)
 
+    def abort(self, t: float, state: State, reason: str) -> TickResult:
+        """End the flight at ``t`` from outside the tick (the serial link failed: state
+        LINK_LOST; an internal error: ABORTED): a failsafe transition to the terminal
+        ``state``. The result carries ctrl mask 0 and is not due: whoever owns the link
+        sends the final mask-0 COMMAND if it still can."""
+        self.supervisor.force(t, state, reason)
+        self._was_commanding = False
+        self._sticks = None
+        self._preview = None
+        self._automatic = False
+        self._command = CommandMsg.release()
+        return TickResult(self._command, False, self.supervisor.state, self.mission.reference(t),
+                          self._estimate, None)
+
     # ------------------------------------------------------------------ steps
     def estimate_step(self, imu: ImuSample | None, poses: Sequence[Pose]) -> StateEstimate | None:
         """The estimator part of a tick (initialise, fuse poses, predict); public for replay.
@@ -244,7 +260,7 @@ class FlightCore:
             force_g = math.sqrt(a1 * a1 + a2 * a2 + a3 * a3) / self.ekf.params.g
         return Observation(
             t=t, data_age_s=health.data_age_s, data_rate_hz=health.data_rate_hz,
-            vicon_age_s=health.vicon_age_s, vicon_rate_hz=health.vicon_rate_hz,
+            vicon_age_s=self._vicon_age(health), vicon_rate_hz=health.vicon_rate_hz,
             estimator_ok=settled and not diverged, estimator_diverged=diverged,
             gravity_ok=gravity_ok, position=(position[0], position[1], position[2]),
             tilt_rad=tilt, height_above_ground_m=height,
@@ -252,8 +268,16 @@ class FlightCore:
             trajectory_done=self.mission.trajectory_done(),
             pilot_enabled=vehicle.pilot_enabled, vehicle_applying=vehicle.applying,
             stop_requests=stop_requests, lift_fraction=self._lift_fraction,
-            specific_force_g=force_g,
+            specific_force_g=force_g, battery_v=vehicle.battery_v,
         )
+
+    def _vicon_age(self, health: InputHealth) -> float:
+        """Time since the last pose the pose filter passed or, once the estimator runs,
+        since the last one it fused, whichever is longer [s]: poses the estimator refuses
+        (a sender it cannot believe) are no Vicon to the failsafes (issue 14)."""
+        if self.init_report is None:
+            return health.vicon_age_s
+        return max(health.vicon_age_s, self.ekf.time_since_fix)
 
     def _position(self) -> np.ndarray:
         if self._estimate is not None:

@@ -22,20 +22,30 @@ Timing per tick (recorded, summarised in :class:`FlightSummary`):
 
 While flying, the daemon holds a PM QoS request for CPU wake-up latency
 (``realtime.cpu_dma_latency_us``, default 0 us) so the CPUs do not drop into
-deep idle states between DATA samples, and shortens the interpreter's thread
+deep idle states between DATA samples, shortens the interpreter's thread
 switch interval to ``realtime.switch_interval_ms`` (0.5 ms; default 5 ms) so a
-reader thread holding the GIL cannot delay a tick by more (see
-:mod:`groundstation.loop.realtime`).
+reader thread holding the GIL cannot delay a tick by more, and paces the garbage
+collector (``realtime.paced_gc``): start-up objects frozen, full collections only
+right after a COMMAND went out (see :mod:`groundstation.loop.realtime`).
 
 Stopping: the first SIGINT/SIGTERM asks the supervisor to land (or hand back,
-see ``safety.on_signal``), a second one hands back at once. Whatever the way
-out, the link sends a final COMMAND with ctrl mask 0, the flight log is flushed
-and closed, and systemd hears STOPPING.
+see ``safety.on_signal``); a second one at least ``safety.second_signal_after_s``
+(0.5 s) later hands back at once, closer ones are the same request (GNU
+``timeout`` signals the process and then its group within a millisecond).
+
+Every way out ends in a terminal supervisor state with its reason: a serial link
+that fails mid-flight is LINK_LOST, an unexpected error in the loop ABORTED (logged
+with its traceback); either way one last row goes to the flight log (that state,
+ctrl mask 0) and :meth:`FlightDaemon.run` returns the summary. The link sends a
+final COMMAND with ctrl mask 0 if it ever flew the vehicle, the flight log is
+flushed and closed with the outcome in its meta.json, and systemd hears STOPPING.
+Only a resource that cannot be opened raises (nothing was sent to the vehicle).
 """
 
 from __future__ import annotations
 
 import math
+import reprlib
 import signal
 import threading
 import time
@@ -52,13 +62,19 @@ from groundstation.asctec.messages import CHANNELS, ConfigMsg
 from groundstation.config import GroundStationConfig, dump_config
 from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
+from groundstation.errors import LinkError
 from groundstation.loop.core import FlightCore, TickResult
-from groundstation.loop.inputs import DataFrontEnd
-from groundstation.loop.realtime import cpu_latency_request, switch_interval
+from groundstation.loop.inputs import DataFrontEnd, VehicleStatus
+from groundstation.loop.realtime import (
+    CollectorPacer,
+    CollectorStats,
+    cpu_latency_request,
+    switch_interval,
+)
 from groundstation.loop.recorder import FlightRecorder
 from groundstation.loop.sdnotify import SdNotifier
-from groundstation.loop.signals import on_stop_signals
-from groundstation.loop.supervisor import State, Transition
+from groundstation.loop.signals import StopRequests, on_stop_signals
+from groundstation.loop.supervisor import FailsafeEvent, Outcome, State, Transition
 from groundstation.loop.ticklog import TickLogger
 from groundstation.loop.timing import TimingHistogram
 from groundstation.telemetry.control import ControlServer, Reply, Request
@@ -78,12 +94,21 @@ class FlightSummary:
     """What a flight did, for the CLI's closing lines and the benchmarks.
 
     final_state, success : the supervisor's terminal state; True for a normal end
+        (the mission completed, or a requested stop, without a failsafe)
+    outcome : how it ended; its value is `gs fly`'s exit code
+    reason : the reason of the last transition (what ended the flight)
     transitions : every state change with its reason
+    events : failsafe events that changed no state (watchdog expiries in the air)
     log_dir : the flight log directory
     track_rms_m, track_max_m : estimate-vs-reference 3-D error while tracking [m]
     compute, jitter, latency : per-tick timing histograms [s] (see the module docstring)
     data_interval : spacing of the received DATA frames [s]
     commands_sent, ticks : counters; duration_s : wall time of the loop [s]
+    max_command_gap_s : longest time between two COMMAND writes while armed [s]
+    keepalive_resends : COMMANDs the keep-alive wrote because the loop had not
+    collector : garbage collections during the loop and their longest pauses
+    control : the control socket's counters (:class:`~groundstation.telemetry.control.
+        ControlStats`: requests answered, malformed, refused...)
     """
 
     final_state: State
@@ -99,6 +124,13 @@ class FlightSummary:
     commands_sent: int
     ticks: int
     duration_s: float
+    outcome: Outcome = Outcome.FAILSAFE
+    reason: str = ""
+    events: list[FailsafeEvent] = field(default_factory=list)
+    max_command_gap_s: float = math.nan
+    keepalive_resends: int = 0
+    collector: CollectorStats = field(default_factory=CollectorStats)
+    control: dict[str, int] = field(default_factory=dict)
 
     def percentiles(self) -> dict[str, tuple[float, float]]:
         """p50 and p99 of compute time, |jitter| and latency [s]."""
@@ -119,6 +151,9 @@ class _Stats:
     track_n: int = 0
     sent: int = 0
     ticks: int = 0
+    max_command_gap: float = math.nan
+    keepalive_resends: int = 0
+    collector: CollectorStats = field(default_factory=CollectorStats)
 
 
 class FlightDaemon:
@@ -141,7 +176,7 @@ class FlightDaemon:
         self._front = DataFrontEnd(config)
         self._progress = progress
         self._stop_event = stop
-        self._signals = [0]
+        self._stops = StopRequests(config.safety.second_signal_after_s)
         self._period = config.serial.data_period_ms / 1000.0
         self._config_msg = ConfigMsg(config.serial.sensor_mask, config.serial.data_period_ms)
         self._stats = _Stats()
@@ -150,18 +185,23 @@ class FlightDaemon:
         """The bound telemetry endpoint once :meth:`run` has started (``*`` ports resolved)."""
         self.control_endpoint: str | None = None
         """The bound control endpoint (``gs channels``) once :meth:`run` has started."""
+        self._control_stats: Callable[[], dict[str, int]] = dict  # the socket's, once open
         self.ready = threading.Event()
         """Set once every resource is open and the loop is about to start."""
 
     def _on_signal(self, sig: signal.Signals) -> None:
-        self._signals[0] += 1
-        log.warning("signal", signal=sig.name, count=self._signals[0])
+        if self._stops.request():
+            log.warning("signal", signal=sig.name, count=self._stops.count)
+        else:
+            log.warning("signal taken as a repeat of the first stop request", signal=sig.name,
+                        within_s=self._stops.repeat_after_s)
 
     @property
     def stop_requests(self) -> int:
-        """Signals received plus one if the stop event is set."""
+        """Stop requests that counted (see :class:`StopRequests`) plus one if the stop
+        event is set."""
         extra = 1 if self._stop_event is not None and self._stop_event.is_set() else 0
-        return self._signals[0] + extra
+        return self._stops.count + extra
 
     def run(self) -> FlightSummary:
         """Fly. Raises LinkError/ViconError/GroundStationError if a resource cannot be opened;
@@ -172,7 +212,7 @@ class FlightDaemon:
             stack.callback(notifier.stopping, "stopping: vehicle handed back")
             link = SerialLink.from_config(cfg.serial)
             stack.callback(link.close)  # sends the final COMMAND with ctrl mask 0
-            vicon = ViconClient.from_config(cfg.vicon).start()
+            vicon = ViconClient.from_config(cfg.vicon, cfg.safety).start()
             stack.callback(vicon.close)
             recorder = FlightRecorder.create(cfg.logging.flight_log_dir, dump_config(cfg),
                                              {"supervisor_states": [s.name for s in State]})
@@ -184,69 +224,105 @@ class FlightDaemon:
             control = ControlServer.from_config(cfg.telemetry)
             stack.callback(control.close)
             self.control_endpoint = control.endpoint
+            self._control_stats = control.stats
             stack.enter_context(on_stop_signals(self._on_signal))
             stack.enter_context(cpu_latency_request(cfg.realtime.cpu_dma_latency_us))
             stack.enter_context(switch_interval(cfg.realtime.switch_interval_ms / 1000.0))
+            # its full collection runs now, before the vehicle streams, and freezes all
+            # that is open
+            pacer = stack.enter_context(CollectorPacer(cfg.realtime.paced_gc))
             link.send(self._config_msg)
             notifier.ready("preflight")
             self.ready.set()
             log.info("flight starting", port=cfg.serial.port, vicon_port=cfg.vicon.port,
                      log=self.log_dir, controller=cfg.controller.type)
-            self._loop(link, vicon, recorder, telemetry, control, notifier)
-        return self._summary()
+            self._loop(_Io(link, vicon, recorder, telemetry, control, notifier, pacer))
+            stats = link.stats()
+            self._stats.max_command_gap = stats.max_command_gap
+            self._stats.keepalive_resends = stats.keepalive_resends
+            self._stats.collector = pacer.stats
+            summary = self._summary()
+            recorder.meta["outcome"] = _outcome_meta(summary)
+        return summary
 
     # ------------------------------------------------------------------ the loop
-    def _loop(self, link: SerialLink, vicon: ViconClient, recorder: FlightRecorder,
-              telemetry: TelemetryPublisher, control: ControlServer,
-              notifier: SdNotifier) -> None:
+    def _loop(self, io: _Io) -> None:
+        """Tick until the supervisor reaches a terminal state. A failure inside a tick
+        ends the flight there (see the module docstring), with one last logged row."""
         core = self.core
-        ticklog = TickLogger(recorder)
-        wd_interval = notifier.watchdog_interval()
-        next_wd = next_progress = last_config = -math.inf
-        t_prev = self._stats.t_start = time.monotonic()
-        t_rx_prev = math.nan
+        ticklog = TickLogger(io.recorder)
+        self._stats.t_start = time.monotonic()
+        clock = _Clock(t_prev=self._stats.t_start, wd_interval=io.notifier.watchdog_interval(),
+                       last_config=self._stats.t_start)  # run() has just sent CONFIG
         while not core.supervisor.terminal:
-            deadline = t_prev + 1.5 * self._period
-            rx = link.get(timeout=max(0.0, deadline - time.monotonic()))
-            start = time.monotonic()
-            poses = _drain(vicon)
-            imu = None
-            if rx is not None:
-                imu = self._front.receive(rx.t, rx.msg)
-                scheduled = rx.t
-                self._stats.data_interval.add(rx.t - t_rx_prev)
-                t_rx_prev = rx.t
-            else:
-                scheduled = deadline
-                if start - last_config > RESEND_CONFIG_AFTER_S and \
-                        self._front.data_age(start) > RESEND_CONFIG_AFTER_S:
-                    link.send(self._config_msg)  # the stream stopped: ask for it again
-                    last_config = start
-            vicon_rate, vicon_age = vicon.rate_and_age()
-            health = self._front.health(start, vicon_age, vicon_rate)
-            result = core.tick(start, imu, poses, self._front.status, health, self.stop_requests)
-            latency = math.nan
-            if result.due:
-                link.send(result.command)
-                self._stats.sent += 1
-                if rx is not None:
-                    latency = time.monotonic() - rx.t
-            if core.supervisor.commanding and not link.armed:
-                link.arm()
-            compute = time.monotonic() - start
-            self._account(start - scheduled, compute, latency, result)
-            ticklog.record(start, rx.msg if rx is not None else None, imu, poses, result,
-                           compute=compute, jitter=start - scheduled, latency=latency)
-            telemetry.maybe_publish(start, partial(self._snapshot, result, link, vicon))
-            control.poll(self.handle_request)
-            if wd_interval is not None and start >= next_wd:
-                notifier.watchdog()
-                next_wd = start + wd_interval / 2
-            if self._progress is not None and start >= next_progress:
-                self._progress(self._progress_line(result, health.data_rate_hz, vicon_rate))
-                next_progress = start + 1.0
-            t_prev = start
+            try:
+                self._tick(io, ticklog, clock)
+            except Exception as exc:  # every way out must end in a logged terminal state
+                self._end(exc, ticklog)
         self._stats.t_end = time.monotonic()
+
+    def _tick(self, io: _Io, ticklog: TickLogger, clock: _Clock) -> None:
+        core, link = self.core, io.link
+        deadline = clock.t_prev + 1.5 * self._period
+        rx = link.get(timeout=max(0.0, deadline - time.monotonic()))
+        start = time.monotonic()
+        poses = _drain(io.vicon)
+        imu = None
+        if rx is not None:
+            imu = self._front.receive(rx.t, rx.msg)
+            scheduled = rx.t
+            self._stats.data_interval.add(rx.t - clock.t_rx_prev)
+            clock.t_rx_prev = rx.t
+        else:
+            scheduled = deadline
+            if start - clock.last_config > RESEND_CONFIG_AFTER_S and \
+                    self._front.data_age(start) > RESEND_CONFIG_AFTER_S:
+                link.send(self._config_msg)  # the stream stopped: ask for it again
+                clock.last_config = start
+        vicon_rate, vicon_age = io.vicon.rate_and_age()
+        health = self._front.health(start, vicon_age, vicon_rate)
+        result = core.tick(start, imu, poses, self._front.status, health, self.stop_requests)
+        clock.t_prev = start
+        latency = math.nan
+        if result.due:
+            link.send(result.command)
+            self._stats.sent += 1
+            if rx is not None:
+                latency = time.monotonic() - rx.t
+        if core.supervisor.commanding and not link.armed:
+            link.arm()
+        compute = time.monotonic() - start
+        self._account(start - scheduled, compute, latency, result)
+        ticklog.record(start, rx.msg if rx is not None else None, imu, poses, result,
+                       compute=compute, jitter=start - scheduled, latency=latency)
+        io.telemetry.maybe_publish(start, partial(self._snapshot, result, link, io.vicon))
+        io.control.poll(self.handle_request)
+        if clock.wd_interval is not None and start >= clock.next_wd:
+            io.notifier.watchdog()
+            clock.next_wd = start + clock.wd_interval / 2
+        if self._progress is not None and start >= clock.next_progress:
+            self._progress(self._progress_line(result, health.data_rate_hz, vicon_rate))
+            clock.next_progress = start + 1.0
+        if result.due:
+            io.pacer.after_command()  # a full collection, if due, now: the next COMMAND is
+            # a command period away
+
+    def _end(self, exc: Exception, ticklog: TickLogger) -> None:
+        """End the flight after ``exc`` escaped a tick: LINK_LOST for the serial link,
+        ABORTED for anything else; log it and record one last row in that state."""
+        t = time.monotonic()
+        if isinstance(exc, LinkError):
+            log.error("serial link failed in flight", error=str(exc))
+            result = self.core.abort(t, State.LINK_LOST, f"serial link failed: {exc}")
+        else:
+            log.exception("flight loop failed", error=repr(exc))
+            result = self.core.abort(t, State.ABORTED,
+                                     f"internal error: {type(exc).__name__}: {exc}")
+        try:
+            ticklog.record(t, None, None, [], result, compute=0.0, jitter=math.nan,
+                           latency=math.nan)
+        except Exception as record_error:  # the row is lost; the flight still ends
+            log.error("last flight-log row not written", error=repr(record_error))
 
     def _account(self, jitter: float, compute: float, latency: float,
                  result: TickResult) -> None:
@@ -270,7 +346,7 @@ class FlightDaemon:
         the pilot's serial-enable switch (or a stop), which the supervisor follows.
         """
         if request.get("request") != "channels":
-            return {"ok": False, "error": f"unknown request {request.get('request')!r} "
+            return {"ok": False, "error": f"unknown request {reprlib.repr(request.get('request'))} "
                                           "(known: 'channels')"}
         core = self.core
         if "auto" in request:
@@ -278,7 +354,7 @@ class FlightDaemon:
             if not isinstance(auto, list) or not auto or \
                     any(c not in CHANNELS for c in auto) or len(set(auto)) != len(auto):
                 return {"ok": False, "error": f"'auto' must list one or more of {list(CHANNELS)} "
-                                              f"once each, got {auto!r}"}
+                                              f"once each, got {reprlib.repr(auto)}"}
             core.set_auto_channels(auto)
             log.info("channels", auto=auto, state=core.state.name)
         auto_now = core.auto_channels
@@ -287,18 +363,20 @@ class FlightDaemon:
 
     def _snapshot(self, result: TickResult, link: SerialLink, vicon: ViconClient
                   ) -> dict[str, dict[str, object]]:
-        sticks = result.sticks if result.sticks is not None else self._front.status.pilot
+        status = self._front.status
+        sticks = result.sticks if result.sticks is not None else status.pilot
         stats = link.stats()
         return {
             "state": state_payload(state=int(result.state), state_name=result.state.name,
                                    estimate=result.estimate, reference=result.reference,
                                    sticks=sticks, ctrl_mask=result.command.ctrl,
-                                   sent=result.due),
+                                   sent=result.due, vehicle=_vehicle_section(status)),
             "health": health_payload(
                 link={"rate_hz": stats.data_rate_hz, "rejected": dict(stats.rejections)},
                 vicon=vicon.health(), estimator=self.core.ekf.health()
                 if self.core.init_report is not None else None,
-                loop={"ticks": self._stats.ticks, "commands": self._stats.sent}),
+                loop={"ticks": self._stats.ticks, "commands": self._stats.sent},
+                control=self._control_stats()),
         }
 
     def _progress_line(self, result: TickResult, data_hz: float, vicon_hz: float) -> str:
@@ -306,8 +384,10 @@ class FlightDaemon:
         if result.estimate is not None:
             e = float(np.linalg.norm(result.reference.position - result.estimate.position))
             err = f"{100 * e:5.1f} cm"
+        volts = self._front.status.battery_v
         return (f"{result.state.name:<9} error {err}  DATA {data_hz:5.1f} Hz  "
-                f"Vicon {vicon_hz:5.1f} Hz  mask 0x{result.command.ctrl:X}")
+                f"Vicon {vicon_hz:5.1f} Hz  mask 0x{result.command.ctrl:X}  battery "
+                + ("--" if math.isnan(volts) else f"{volts:.2f} V"))
 
     def _summary(self) -> FlightSummary:
         s, sup = self._stats, self.core.supervisor
@@ -318,8 +398,58 @@ class FlightDaemon:
             track_max_m=s.track_max if s.track_n else math.nan,
             compute=s.compute, jitter=s.jitter, latency=s.latency,
             data_interval=s.data_interval, commands_sent=s.sent,
-            ticks=s.ticks, duration_s=s.t_end - s.t_start,
+            ticks=s.ticks, duration_s=s.t_end - s.t_start, outcome=sup.outcome,
+            reason=sup.transitions[-1].reason if sup.transitions else "",
+            events=list(sup.events), max_command_gap_s=s.max_command_gap,
+            keepalive_resends=s.keepalive_resends, collector=s.collector,
+            control=self._control_stats(),
         )
+
+
+@dataclass
+class _Io:
+    """What the loop talks to, opened by :meth:`FlightDaemon.run`."""
+
+    link: SerialLink
+    vicon: ViconClient
+    recorder: FlightRecorder
+    telemetry: TelemetryPublisher
+    control: ControlServer
+    notifier: SdNotifier
+    pacer: CollectorPacer
+
+
+@dataclass
+class _Clock:
+    """The loop's schedule between ticks [monotonic s]."""
+
+    t_prev: float
+    wd_interval: float | None
+    t_rx_prev: float = math.nan
+    next_wd: float = -math.inf
+    next_progress: float = -math.inf
+    last_config: float = -math.inf
+    """When CONFIG was last sent: it is re-sent when no DATA came for 0.5 s after it."""
+
+
+def _vehicle_section(status: VehicleStatus) -> dict[str, object]:
+    """The telemetry ``vehicle`` section from the X-3D's last STATUS and RC blocks."""
+    return {"battery_v": status.battery_v, "serial_active": bool(status.flags & 0x01),
+            "motors_on": bool(status.flags & 0x02), "rc_valid": bool(status.flags & 0x04),
+            "applied_mask": status.applied_mask, "pilot_enabled": status.pilot_enabled}
+
+
+def _outcome_meta(summary: FlightSummary) -> dict[str, object]:
+    """The flight's outcome for meta.json."""
+    return {
+        "outcome": summary.outcome.name, "exit_code": int(summary.outcome),
+        "final_state": summary.final_state.name, "reason": summary.reason,
+        "failsafe_transitions": [
+            {"t": tr.t, "old": tr.old.name, "new": tr.new.name, "reason": tr.reason}
+            for tr in summary.transitions if tr.failsafe],
+        "events": [{"t": e.t, "kind": e.kind, "duration_s": e.duration_s, "reason": e.reason}
+                   for e in summary.events],
+    }
 
 
 def _drain(vicon: ViconClient) -> list[Pose]:

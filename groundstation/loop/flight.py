@@ -1,32 +1,75 @@
 """``gs fly``: run one flight (optionally against the virtual lab) and report it.
 
-Returns the process exit code: 0 after a normal landing and handover or a
-requested stop, 1 otherwise, 2 for a trajectory that cannot be flown (refused
-before anything is connected). Resource errors (port, socket, log directory)
-are reported in one line, never as a traceback.
+Returns the process exit code (:data:`EXIT_CODES`, printed by ``gs fly --help``):
+
+0. the mission was flown, the vehicle landed and was handed back, no failsafe acted;
+1. a failsafe acted or the flight was aborted: a failsafe landing (Vicon lost, the
+   volume left, tilt, low battery, take-off timeout), a failsafe handback, the pilot
+   took over, the vehicle's watchdog expired in the air, the link was lost, the
+   preflight checks failed, an internal error;
+2. configuration or usage error, or a trajectory refused before flight: nothing was
+   connected;
+3. could not start: a resource could not be opened (the serial port absent or in use
+   by another flight, the Vicon or telemetry port taken, the log directory not
+   writable); nothing was sent to the vehicle;
+4. stopped on request (SIGINT/SIGTERM) without a failsafe: landed, or handed back at a
+   second request or as ``safety.on_signal`` configures.
+
+Whatever the way out of a flight, the summary is printed (its first line says the final
+state, why, and the exit code) and the flight log's meta.json holds the same outcome.
+Resource errors are reported in one line, never as a traceback.
 """
 
 from __future__ import annotations
 
 import math
+import tempfile
 from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
 
-from groundstation.config import GroundStationConfig, apply_overrides
-from groundstation.errors import GroundStationError, TrajectoryError
-from groundstation.loop.assemble import trajectory_for_flight
+from groundstation.config import GroundStationConfig, apply_overrides, dump_config
+from groundstation.errors import ConfigError, GroundStationError
+from groundstation.loop.core import FlightCore
 from groundstation.loop.daemon import FlightDaemon, FlightSummary
+from groundstation.loop.supervisor import Outcome
 
 Echo = Callable[[str], None]
+
+EXIT_USAGE = 2
+EXIT_NOT_STARTED = 3
+
+EXIT_CODES: dict[int, str] = {
+    int(Outcome.COMPLETED): "mission completed: landed and handed back, no failsafe",
+    int(Outcome.FAILSAFE): "failsafe or abort: a failsafe landing or handback, pilot "
+                           "takeover, watchdog expiry in the air, link lost, preflight "
+                           "failed, internal error",
+    EXIT_USAGE: "configuration or usage error, or a trajectory refused before flight "
+                "(nothing connected)",
+    EXIT_NOT_STARTED: "could not start: serial port absent or in use, Vicon or telemetry "
+                      "port taken, log directory not writable (nothing sent to the vehicle)",
+    int(Outcome.STOPPED): "stopped on request (SIGINT/SIGTERM): landed, or handed back at a "
+                          "second request",
+}
+"""Exit code -> meaning, as ``gs fly --help`` and the README list them."""
+
+_OUTCOME_WORDS = {
+    Outcome.COMPLETED: "mission completed",
+    Outcome.FAILSAFE: "failsafe or abort",
+    Outcome.STOPPED: "stopped on request",
+}
 
 
 def summary_lines(summary: FlightSummary) -> list[str]:
     """The short human-readable report printed after a flight."""
-    lines = [f"flight ended in {summary.final_state.name} "
-             f"({'normal end' if summary.success else 'NOT a normal end'})"]
-    lines += [f"  {tr.t - summary.transitions[0].t:7.2f} s  {tr.old.name} -> {tr.new.name}: "
-              f"{tr.reason}" for tr in summary.transitions]
+    outcome = summary.outcome
+    lines = [f"flight ended in {summary.final_state.name}: {summary.reason} "
+             f"({_OUTCOME_WORDS[outcome]}, exit code {int(outcome)})"]
+    t0 = summary.transitions[0].t if summary.transitions else 0.0
+    lines += [f"  {tr.t - t0:7.2f} s  {tr.old.name} -> {tr.new.name}: {tr.reason}"
+              + ("  [failsafe]" if tr.failsafe else "") for tr in summary.transitions]
+    lines += [f"  {e.t - t0:7.2f} s  failsafe event ({e.kind}, {1e3 * e.duration_s:.0f} ms): "
+              f"{e.reason}" for e in summary.events]
     if not math.isnan(summary.track_rms_m):
         lines.append(f"  tracking error (estimate vs reference): RMS "
                      f"{100 * summary.track_rms_m:.1f} cm, max {100 * summary.track_max_m:.1f} cm")
@@ -36,43 +79,73 @@ def summary_lines(summary: FlightSummary) -> list[str]:
         f"{1e6 * p['compute'][0]:.0f}/{1e6 * p['compute'][1]:.0f} us, jitter p99 "
         f"{1e3 * p['jitter'][1]:.2f} ms, DATA->COMMAND latency p50/p99 "
         f"{1e3 * p['latency'][0]:.2f}/{1e3 * p['latency'][1]:.2f} ms")
+    gc = summary.collector
+    lines.append(
+        f"  longest COMMAND gap {1e3 * summary.max_command_gap_s:.1f} ms (keep-alive resends "
+        f"{summary.keepalive_resends}); garbage collections: {gc.young} young (longest "
+        f"{1e3 * gc.longest_young_s:.2f} ms), {gc.full} full (longest "
+        f"{1e3 * gc.longest_full_s:.2f} ms)")
+    c = summary.control
+    if any(c.values()):
+        lines.append(f"  control socket: {c.get('answered', 0)} requests answered, "
+                     + ", ".join(f"{n} {name.replace('_', ' ')}" for name, n in c.items()
+                                 if n and name != "answered"))
     lines.append(f"  flight log: {summary.log_dir}")
     return lines
 
 
 def fly_command(config: GroundStationConfig, *, duration_s: float | None = None,
                 demo: bool = False, echo: Echo = print) -> int:
-    """Fly once; with ``demo`` start the virtual lab first and plot the result."""
-    try:
-        trajectory_for_flight(config, duration_s=duration_s)  # the flight core builds it again
-    except TrajectoryError as exc:
+    """Fly once; with ``demo`` start the virtual lab first and plot the result.
+    Returns the exit code (see the module docstring)."""
+    try:  # the checks `gs check-config` runs, before anything is connected; the daemon
+        # builds the core again (about 50 ms) for the configuration it flies
+        FlightCore(config, duration_s=duration_s)
+    except (GroundStationError, ValueError, ArithmeticError) as exc:
         echo(f"error: {exc}")
-        return 2
+        return EXIT_USAGE
     try:
         with ExitStack() as stack:
             truth_file: Path | None = None
-            device = None
             if demo:
                 if config.sim is None:
                     echo("error: --demo needs a configuration with a `sim:` section "
                          "(config/sim.yaml)")
-                    return 2
-                from sim_device.realtime import SimDeviceThread, default_truth_path
-
-                truth_file = default_truth_path(config)
-                device = stack.enter_context(SimDeviceThread(config, truth_file=truth_file))
-                echo(f"virtual lab: X-3D on {device.info.pty_path}, Vicon -> "
-                     f"udp://{device.info.vicon_target[0]}:{device.info.vicon_target[1]}")
-                config = apply_overrides(config, {"serial.port": device.info.pty_path})
+                    return EXIT_USAGE
+                config, truth_file = _start_virtual_lab(config, stack, echo)
             summary = FlightDaemon(config, duration_s=duration_s, progress=echo).run()
-        for line in summary_lines(summary):
-            echo(line)
-        if demo and summary.log_dir:
-            _plot(summary.log_dir, truth_file, echo)
-        return 0 if summary.success else 1
-    except GroundStationError as exc:
+    except ConfigError as exc:
         echo(f"error: {exc}")
-        return 1
+        return EXIT_USAGE
+    except GroundStationError as exc:  # a resource could not be opened: nothing was flown
+        echo(f"error: {exc}")
+        return EXIT_NOT_STARTED
+    for line in summary_lines(summary):
+        echo(line)
+    if demo and summary.log_dir:
+        _plot(summary.log_dir, truth_file, echo)
+    return int(summary.outcome)
+
+
+def _start_virtual_lab(config: GroundStationConfig, stack: ExitStack, echo: Echo
+                       ) -> tuple[GroundStationConfig, Path]:
+    """Start `gs sim-device` in a child process for the block ``stack`` closes; return the
+    configuration pointing at its pty and its truth file. A process of its own, as the
+    vehicle is: a pause of this one (a loaded machine) cannot stop the vehicle's clock."""
+    from sim_device.realtime import SimDeviceProcess, default_truth_path
+
+    truth_file = default_truth_path(config)
+    truth_file.parent.mkdir(parents=True, exist_ok=True)
+    workdir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="gs-demo-")))
+    config_file = workdir / "sim.yaml"
+    config_file.write_text(dump_config(config), encoding="utf-8")
+    try:
+        device = stack.enter_context(SimDeviceProcess(config_file, truth_file))
+    except RuntimeError as exc:
+        raise GroundStationError(f"the virtual lab did not start: {exc}") from exc
+    target = config.sim.vicon.target_address if config.sim is not None else "127.0.0.1"
+    echo(f"virtual lab: X-3D on {device.pty_path}, Vicon -> udp://{target}:{config.vicon.port}")
+    return apply_overrides(config, {"serial.port": device.pty_path}), truth_file
 
 
 def _plot(log_dir: str, truth_file: Path | None, echo: Echo) -> None:

@@ -103,7 +103,7 @@ class InProcessFlight:
         self._profile = config.serial.crc_profile
         self._decoder = StreamDecoder(self._profile)
         self._front = DataFrontEnd(config)
-        self._poses = PoseFilter.from_config(config.vicon)
+        self._poses = PoseFilter.from_config(config.vicon, config.safety)
         self._period = config.serial.data_period_ms / 1000.0
         self.stop_requests = 0
         self.trace = FlightTrace()
@@ -115,6 +115,11 @@ class InProcessFlight:
         lab's simulated seconds; timing columns hold the core's compute time)."""
         self.lab.write(encode_frame(ConfigMsg(config.serial.sensor_mask,
                                               config.serial.data_period_ms), self._profile))
+
+    @property
+    def pose_filter(self) -> PoseFilter:
+        """The pose filter every Vicon datagram goes through (read its :meth:`health`)."""
+        return self._poses
 
     def _vicon(self) -> list[Pose]:
         out = []

@@ -24,16 +24,23 @@ from groundstation.vicon.health import RateMonitor
 
 @dataclass(frozen=True, slots=True)
 class VehicleStatus:
-    """What the X-3D reports about who flies it (STATUS and RC blocks).
+    """What the X-3D reports about who flies it and its battery (STATUS and RC blocks).
 
     pilot : the pilot's sticks (RC block)
     pilot_enabled : RC serial-enable switch on
     applying : STATUS bit0, the X-3D is applying ground-station commands
+    battery_v : battery voltage [V] (NaN until a STATUS block arrives)
+    flags : the STATUS flags byte (bit0 serial control active, bit1 motors on, bit2 RC
+        link valid; 0 without STATUS)
+    applied_mask : the ctrl mask the X-3D applies (STATUS; 0 without STATUS)
     """
 
     pilot: Sticks
     pilot_enabled: bool
     applying: bool
+    battery_v: float = math.nan
+    flags: int = 0
+    applied_mask: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,10 +110,14 @@ class DataFrontEnd:
         self._t_last = t
         status, rc = msg.status, msg.rc
         if status is not None or rc is not None:
+            old = self.status
             self.status = VehicleStatus(
-                pilot=rc.sticks() if rc is not None else self.status.pilot,
+                pilot=rc.sticks() if rc is not None else old.pilot,
                 pilot_enabled=rc.serial_enabled if rc is not None else True,
                 applying=status.serial_active if status is not None else True,
+                battery_v=1e-3 * status.battery_mv if status is not None else old.battery_v,
+                flags=status.flags if status is not None else old.flags,
+                applied_mask=status.ctrl_mask if status is not None else old.applied_mask,
             )
         if msg.gyro is None or msg.acc is None:
             return None

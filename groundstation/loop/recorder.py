@@ -64,6 +64,13 @@ Fields (frames: NED earth, FRD body; quaternions scalar-first, R(q) = eCb)::
     ctrl_pitch, ctrl_roll, ctrl_yaw, ctrl_thrust
                          RC unit  the controller's sticks before the handover blend
                                   (0 when the controller did not run this tick)
+    battery_v            V        battery voltage the X-3D reports (STATUS; NaN without it)
+    vehicle_flags        bits     STATUS flags: bit0 the X-3D applies ground-station
+                                  commands, bit1 motors on, bit2 RC link valid
+    vehicle_mask         bits     ctrl mask the X-3D applies (STATUS): 0 while the pilot
+                                  has every channel, e.g. after its watchdog expired
+    pilot_enabled        bool     the pilot's serial-enable switch (RC block; True without it)
+                                  (these four: the last DATA frame that carried them)
     state                -        supervisor state (names in meta["supervisor_states"])
     compute_time         s        time spent computing this tick
     jitter               s        tick start minus its scheduled time
@@ -92,7 +99,7 @@ from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Stick
 
 log = structlog.get_logger(__name__)
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 """Bumped whenever :data:`RECORD_DTYPE` changes; stored in meta.json."""
 
 _XYZ = ("x", "y", "z")
@@ -145,6 +152,10 @@ _SCHEMA: tuple[tuple[str, str, tuple[str, ...] | None, str | tuple[str, ...]], .
     ("ctrl_roll", "<i2", None, "RC unit"),
     ("ctrl_yaw", "<i2", None, "RC unit"),
     ("ctrl_thrust", "<i2", None, "RC unit"),
+    ("battery_v", "<f8", None, "V"),
+    ("vehicle_flags", "|u1", None, "bits"),
+    ("vehicle_mask", "|u1", None, "bits"),
+    ("pilot_enabled", "|b1", None, "bool"),
     ("state", "|u1", None, "enum"),
     ("compute_time", "<f8", None, "s"),
     ("jitter", "<f8", None, "s"),
@@ -345,7 +356,8 @@ class FlightRecorder:
         pose: Pose | None, estimate: StateEstimate | None, reference: Reference | None,
         command: CommandMsg, controller: Sticks | None, sent: bool, state: int,
         compute_time: float, jitter: float, latency: float, preview: Reference | None = None,
-        automatic: bool = False,
+        automatic: bool = False, battery_v: float = np.nan, vehicle_flags: int = 0,
+        vehicle_mask: int = 0, pilot_enabled: bool = True,
     ) -> None:
         """Record one tick (hot path: no validation, no allocation).
 
@@ -358,6 +370,8 @@ class FlightRecorder:
             see the ``cmd_automatic`` column
         controller : the controller's sticks before the handover (None: it did not run)
         state : supervisor state as an int; compute_time, jitter, latency [s]
+        battery_v [V], vehicle_flags, vehicle_mask, pilot_enabled : what the vehicle last
+            reported (STATUS and RC blocks)
         Values that do not fit (wrong shape, out of the column's range) skip the row
         and count in :attr:`bad_rows`; appending after close is ignored.
         """
@@ -387,6 +401,10 @@ class FlightRecorder:
             c["ctrl_roll"][i] = s.roll
             c["ctrl_yaw"][i] = s.yaw
             c["ctrl_thrust"][i] = s.thrust
+            c["battery_v"][i] = battery_v
+            c["vehicle_flags"][i] = vehicle_flags
+            c["vehicle_mask"][i] = vehicle_mask
+            c["pilot_enabled"][i] = pilot_enabled
             c["state"][i] = state
             c["compute_time"][i] = compute_time
             c["jitter"][i] = jitter

@@ -15,18 +15,26 @@ States and transitions::
       HOLD and Vicon back                      -> the state HOLD interrupted
       HOLD and Vicon silent > vicon_loss_land_s -> LAND
       outside the volume or tilt > max         -> LAND
+      battery below battery_land_v for battery_grace_s -> LAND
       TAKEOFF not done after takeoff_timeout_s -> LAND
       LAND and tilt > handback tilt            -> HANDBACK (the landing lost the attitude)
     any state:
       estimator diverged                       -> HANDBACK (mask 0 at once)
       no DATA for link_loss_s (after PREFLIGHT) -> LINK_LOST (log and stop)
-      pilot switch off / X-3D not applying us  -> PILOT (respected at once)
+      pilot switch off                         -> PILOT (respected at once)
+      X-3D not applying us for pilot_grace_s   -> PILOT; shorter (a watchdog expiry): an event
       second stop request                      -> HANDBACK
       first stop request: airborne -> LAND (or HANDBACK if configured); on the ground -> DONE
     PREFLIGHT longer than preflight_timeout_s  -> ABORTED
+    from outside (:meth:`Supervisor.force`): serial link failed -> LINK_LOST, a bug -> ABORTED
 
 Terminal states: DONE, HANDBACK, PILOT, LINK_LOST, ABORTED. In every terminal state
 and in PREFLIGHT the ground station sends ctrl mask 0: the pilot has the vehicle.
+
+Every transition a failsafe makes is marked (``Transition.failsafe``) and logged as a
+warning, as is every :class:`FailsafeEvent` (the vehicle applied none of our commands
+for a while in the air and came back: its watchdog expired). :attr:`Supervisor.outcome`
+says how the flight ended; its value is ``gs fly``'s exit code.
 """
 
 from __future__ import annotations
@@ -38,6 +46,23 @@ from dataclasses import dataclass, field
 import structlog
 
 log = structlog.get_logger(__name__)
+
+
+class Outcome(enum.IntEnum):
+    """How a flight ended; the value is the exit code of ``gs fly``.
+
+    COMPLETED : the mission was flown, the vehicle landed and was handed back, and no
+        failsafe acted
+    FAILSAFE : a failsafe acted (a failsafe landing or handback, the pilot took over,
+        the link was lost, the vehicle's watchdog expired in the air) or the flight was
+        aborted (preflight failed, an internal error)
+    STOPPED : stopped on request (SIGINT/SIGTERM, a stop event) without a failsafe: landed,
+        or handed back at a second request or as ``safety.on_signal`` configures
+    """
+
+    COMPLETED = 0
+    FAILSAFE = 1
+    STOPPED = 4
 
 
 class State(enum.IntEnum):
@@ -93,6 +118,10 @@ class SupervisorLimits:
     pilot_grace_s: float = 0.2
     """The X-3D may report 'not applying' briefly (a watchdog blip); longer is the pilot."""
     on_signal: str = "land"
+    battery_land_v: float | None = None
+    """Land when the reported battery voltage stays below this [V] (None: no check) ..."""
+    battery_grace_s: float = 10.0
+    """... for this long [s]; below it at preflight refuses the take-off."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -120,6 +149,7 @@ class Observation:
         holds the vehicle up: a vehicle in the air with that little lift would be
         falling and feel less. This landing check does not use the height
         estimate, which drifts when a landing is flown without Vicon.
+    battery_v : battery voltage the X-3D reports [V] (NaN: no STATUS block)
     """
 
     t: float
@@ -140,15 +170,33 @@ class Observation:
     stop_requests: int = 0
     lift_fraction: float = 1.0
     specific_force_g: float = 1.0
+    battery_v: float = math.nan
 
 
 @dataclass(frozen=True, slots=True)
 class Transition:
-    """One state change: when, from, to and why."""
+    """One state change: when, from, to, why, and whether a failsafe made it."""
 
     t: float
     old: State
     new: State
+    reason: str
+    failsafe: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class FailsafeEvent:
+    """Something a failsafe noticed that did not change the state.
+
+    t : when it began [s]; duration_s : how long it lasted [s]
+    kind : "watchdog": the X-3D applied none of our commands while we commanded it (its
+        100 ms watchdog expired: no valid COMMAND reached it) and then applied them again
+    reason : one line for the log and the summary
+    """
+
+    t: float
+    kind: str
+    duration_s: float
     reason: str
 
 
@@ -164,8 +212,13 @@ class Supervisor:
     _held: State = State.TRACK
     _landed_since: float | None = None
     _not_applying_since: float | None = None
+    _applied: bool = False
+    _battery_low_since: float | None = None
     _handled_stops: int = 0
+    _stopped: bool = False
     preflight_failures: list[str] = field(default_factory=list)
+    events: list[FailsafeEvent] = field(default_factory=list)
+    """Failsafe events that did not change the state (see :class:`FailsafeEvent`)."""
 
     @property
     def terminal(self) -> bool:
@@ -178,11 +231,19 @@ class Supervisor:
         return self.state in FLYING
 
     @property
+    def outcome(self) -> Outcome:
+        """How the flight ended (FAILSAFE while it has not: it did not finish)."""
+        if not self.terminal or self.state in (State.PILOT, State.LINK_LOST, State.ABORTED) \
+                or self.events or any(tr.failsafe for tr in self.transitions):
+            return Outcome.FAILSAFE
+        if self._stopped:
+            return Outcome.STOPPED
+        return Outcome.COMPLETED if self.state is State.DONE else Outcome.FAILSAFE
+
+    @property
     def success(self) -> bool:
-        """A terminal state that counts as a normal end (exit code 0)."""
-        if self.state is State.DONE:
-            return True
-        return self.state is State.HANDBACK and self.transitions[-1].reason.startswith("stop")
+        """A normal end: the mission completed, or stopped on request, without a failsafe."""
+        return self.outcome is not Outcome.FAILSAFE
 
     def time_in_state(self, t: float) -> float:
         """Seconds since the last transition."""
@@ -192,7 +253,7 @@ class Supervisor:
         """Change state; a failsafe (and every state that takes the plan away) is logged
         as a warning."""
         old = self.state
-        self.transitions.append(Transition(t, old, new, reason))
+        self.transitions.append(Transition(t, old, new, reason, failsafe))
         self.state = new
         self._t_state = t
         level = "warning" if failsafe or new in (State.HOLD, State.HANDBACK, State.PILOT,
@@ -208,40 +269,85 @@ class Supervisor:
             self._t_state = obs.t
         if self.terminal:
             return self.state
-        reason = self._global_failsafe(obs)
-        if reason is not None:
-            return self._go(obs.t, *reason)
+        self._watch_battery(obs)
+        change = self._global_failsafe(obs)
+        if change is not None:
+            state, reason, failsafe = change
+            return self._go(obs.t, state, reason, failsafe=failsafe)
         handler = _HANDLERS[self.state]
         return handler(self, obs)
 
+    def force(self, t: float, state: State, reason: str) -> State:
+        """End the flight from outside the state machine (the serial link failed, an
+        internal error): a failsafe transition to the terminal ``state``."""
+        if not self.terminal:
+            self._go(t, state, reason, failsafe=True)
+        return self.state
+
     # ------------------------------------------------------------------ failsafes
-    def _global_failsafe(self, obs: Observation) -> tuple[State, str] | None:
+    def _global_failsafe(self, obs: Observation) -> tuple[State, str, bool] | None:
+        """(new state, reason, made by a failsafe) or None."""
         lim = self.limits
         if obs.data_age_s > lim.link_loss_s and self.state is not State.PREFLIGHT:
-            return State.LINK_LOST, f"no DATA for {obs.data_age_s:.2f} s"
+            return State.LINK_LOST, f"no DATA for {obs.data_age_s:.2f} s", True
         if not obs.pilot_enabled:
-            return State.PILOT, "pilot switched serial control off"
+            return State.PILOT, "pilot switched serial control off", True
+        lapse = self._watch_applying(obs)
+        if lapse is not None:
+            return State.PILOT, f"X-3D stopped applying ground-station commands ({lapse})", True
+        if obs.estimator_diverged and self.state is not State.PREFLIGHT:
+            return State.HANDBACK, "estimator diverged", True
+        if obs.stop_requests > self._handled_stops:
+            self._handled_stops = obs.stop_requests
+            stop = self._stop(obs.stop_requests)
+            if stop is not None:
+                self._stopped = True
+                return (*stop, False)
+        return None
+
+    def _stop(self, requests: int) -> tuple[State, str] | None:
+        if requests >= 2:
+            return State.HANDBACK, "stop requested twice: immediate handback"
+        if self.state not in AIRBORNE:
+            return (State.DONE, "stop requested on the ground") if self.state is \
+                State.DISARM else (State.HANDBACK, "stop requested before take-off")
+        if self.limits.on_signal == "handback":
+            return State.HANDBACK, "stop requested: handback configured"
+        if self.state is not State.LAND:
+            return State.LAND, "stop requested: landing"
+        return None
+
+    def _watch_applying(self, obs: Observation) -> str | None:
+        """Follow STATUS bit0 while commanding. A lapse longer than ``pilot_grace_s`` is
+        the pilot's (returns its description); a shorter one, once the vehicle had applied
+        our commands, was its watchdog expiring: a :class:`FailsafeEvent` when it ends."""
         if self.commanding and not obs.vehicle_applying:
             if self._not_applying_since is None:
                 self._not_applying_since = obs.t
-            elif obs.t - self._not_applying_since > lim.pilot_grace_s:
-                return State.PILOT, "X-3D stopped applying ground-station commands"
-        else:
-            self._not_applying_since = None
-        if obs.estimator_diverged and self.state is not State.PREFLIGHT:
-            return State.HANDBACK, "estimator diverged"
-        if obs.stop_requests > self._handled_stops:
-            self._handled_stops = obs.stop_requests
-            if obs.stop_requests >= 2:
-                return State.HANDBACK, "stop requested twice: immediate handback"
-            if self.state not in AIRBORNE:
-                return (State.DONE, "stop requested on the ground") if self.state is \
-                    State.DISARM else (State.HANDBACK, "stop requested before take-off")
-            if self.limits.on_signal == "handback":
-                return State.HANDBACK, "stop requested: handback configured"
-            if self.state is not State.LAND:
-                return State.LAND, "stop requested: landing"
+            elif obs.t - self._not_applying_since > self.limits.pilot_grace_s:
+                return f"none applied for {obs.t - self._not_applying_since:.2f} s"
+            return None
+        since, self._not_applying_since = self._not_applying_since, None
+        if not self.commanding:
+            return None
+        if since is not None and self._applied:
+            duration = obs.t - since
+            reason = (f"the X-3D applied none of our commands for {1e3 * duration:.0f} ms "
+                      "(its watchdog expired: no COMMAND reached it for 100 ms)")
+            self.events.append(FailsafeEvent(since, "watchdog", duration, reason))
+            log.warning("failsafe event", kind="watchdog", duration_s=round(duration, 3),
+                        t=round(since, 3), state=self.state.name, reason=reason, failsafe=True)
+        self._applied = True
         return None
+
+    def _watch_battery(self, obs: Observation) -> None:
+        """Track how long the battery has been below ``battery_land_v``."""
+        limit = self.limits.battery_land_v
+        if limit is not None and obs.battery_v < limit:  # NaN (no STATUS) compares False
+            if self._battery_low_since is None:
+                self._battery_low_since = obs.t
+        else:
+            self._battery_low_since = None
 
     def _airborne_failsafe(self, obs: Observation) -> tuple[State, str] | None:
         lim = self.limits
@@ -253,6 +359,11 @@ class Supervisor:
             return State.LAND, f"left the volume at ({x:.2f}, {y:.2f}, {z:.2f})"
         if obs.tilt_rad > lim.max_tilt_rad and self.state is not State.LAND:
             return State.LAND, f"tilt {math.degrees(obs.tilt_rad):.0f} deg over the limit"
+        low = self._battery_low_since
+        if low is not None and obs.t - low >= lim.battery_grace_s and \
+                self.state is not State.LAND:
+            return State.LAND, (f"battery {obs.battery_v:.2f} V below {lim.battery_land_v:.2f} V "
+                                f"for {obs.t - low:.1f} s")
         if obs.vicon_age_s > lim.vicon_loss_land_s and self.state is not State.LAND:
             return State.LAND, f"Vicon lost for {obs.vicon_age_s:.2f} s"
         if obs.vicon_age_s > lim.vicon_loss_hold_s and self.state in (State.TAKEOFF, State.TRACK):
@@ -275,6 +386,8 @@ class Supervisor:
         if not obs.gravity_ok:
             failures.append("accelerometer gravity disagrees with the Vicon attitude "
                             "(check vicon.world_to_ned / body_to_object)")
+        if lim.battery_land_v is not None and obs.battery_v < lim.battery_land_v:
+            failures.append(f"battery {obs.battery_v:.2f} V < {lim.battery_land_v:.2f} V")
         self.preflight_failures = failures
         if not failures:
             return self._go(obs.t, State.TAKEOFF, "preflight checks passed")
@@ -315,7 +428,8 @@ class Supervisor:
     def _land(self, obs: Observation) -> State:
         if obs.tilt_rad > self.limits.handback_tilt_rad:
             return self._go(obs.t, State.HANDBACK, f"landing failed: tilt "
-                            f"{math.degrees(obs.tilt_rad):.0f} deg, the pilot takes over")
+                            f"{math.degrees(obs.tilt_rad):.0f} deg, the pilot takes over",
+                            failsafe=True)
         failsafe = self._airborne_failsafe(obs)
         if failsafe is not None:
             return self._go(obs.t, *failsafe, failsafe=True)

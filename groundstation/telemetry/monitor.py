@@ -79,6 +79,22 @@ def _command(cmd: Mapping[str, Any] | None) -> str:
         return "malformed command " + repr(dict(cmd))
 
 
+def _vehicle(section: Mapping[str, Any] | None) -> str:
+    """``battery 11.78 V  applies 1111  motors on  RC ok  switch on`` (the STATUS block)."""
+    if not isinstance(section, Mapping):
+        return "--"
+    volts = section.get("battery_v")
+    mask = section.get("applied_mask")
+    parts = ["battery " + ("  --  V" if not isinstance(volts, int | float)
+                           else f"{volts:6.2f} V"),
+             "applies " + (f"{mask:04b}" if isinstance(mask, int) and section.get(
+                 "serial_active") else "none (pilot)"),
+             "motors " + ("on" if section.get("motors_on") else "off"),
+             "RC " + ("ok" if section.get("rc_valid") else "LOST"),
+             "switch " + ("on" if section.get("pilot_enabled", True) else "OFF")]
+    return "  ".join(parts)
+
+
 def render(
     state: Mapping[str, Any] | None, health: Mapping[str, Any] | None, *,
     endpoint: str = "", received: int = 0, age_s: float | None = None,
@@ -104,6 +120,7 @@ def render(
         + (f"   [schema {schema}, expected {SCHEMA_VERSION}]"
            if schema not in (None, SCHEMA_VERSION) else ""),
         "command    " + _command(cmd),
+        "vehicle    " + _vehicle(_get(state, "vehicle")),
         "position   " + _vec(_get(state, "estimate", "position")) + "  (estimate, NED)",
         "reference  " + _vec(_get(state, "reference", "position")),
         "error      " + _vec(_get(state, "error", "position"))

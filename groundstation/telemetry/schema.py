@@ -23,6 +23,10 @@ Topic ``state``::
     reference   {position [3] m NED, velocity [3] m/s NED, yaw rad} | null
     error       {position [3] m NED (reference - estimate), distance m} | null
     command     {pitch, roll, yaw, thrust: RC units; mask: ctrl-mask bits; sent: bool}
+    vehicle     what the X-3D last reported (STATUS and RC blocks): {battery_v V (null
+                before the first STATUS), serial_active bool (it applies our commands),
+                motors_on bool, rc_valid bool, applied_mask ctrl-mask bits,
+                pilot_enabled bool (the serial-enable switch)} | null
 
 Topic ``health`` (each section an object, or null when that part is not running)::
 
@@ -32,6 +36,8 @@ Topic ``health`` (each section an object, or null when that part is not running)
                 time_since_pose_s, and any further counters (ViconHealth's fields)
     estimator   estimator counters, e.g. rejected updates (free-form object)
     loop        loop timing, e.g. overruns, compute_time_s, jitter_s (free-form)
+    control     the control socket (``gs channels``): {answered, malformed, failed,
+                frames_discarded, refused, socket_errors, reopened} | null
     telemetry   {sent, dropped, errors}: this publisher's own counters
 
 :func:`state_payload` and :func:`health_payload` build the bodies; the publisher
@@ -112,6 +118,7 @@ def missing_fields(topic: str, payload: Mapping[str, Any]) -> list[str]:
 def state_payload(
     *, state: int, state_name: str, estimate: StateEstimate | None,
     reference: Reference | None, sticks: Sticks, ctrl_mask: int, sent: bool,
+    vehicle: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Body of a ``state`` message (see the module docstring for fields and units),
     already in plain JSON types."""
@@ -133,16 +140,19 @@ def state_payload(
         "error": error,
         "command": {"pitch": sticks.pitch, "roll": sticks.roll, "yaw": sticks.yaw,
                     "thrust": sticks.thrust, "mask": int(ctrl_mask), "sent": bool(sent)},
+        "vehicle": vehicle,
     })
     return body
 
 
 def health_payload(
     *, link: Any = None, vicon: Any = None, estimator: Any = None, loop: Any = None,
+    control: Any = None,
 ) -> dict[str, Any]:
     """Body of a ``health`` message. Each section is a mapping or a dataclass
     (e.g. :class:`groundstation.vicon.health.ViconHealth`) or None; ``link`` and
     ``vicon`` should carry ``rate_hz`` and ``rejected`` for the monitor. The
     publisher fills in the ``telemetry`` section."""
     return {"link": jsonable(link), "vicon": jsonable(vicon),
-            "estimator": jsonable(estimator), "loop": jsonable(loop)}
+            "estimator": jsonable(estimator), "loop": jsonable(loop),
+            "control": jsonable(control)}
