@@ -125,3 +125,26 @@ def test_a_full_turn_while_holding_position_changes_nothing(name: str) -> None:
     err = np.degrees(np.abs(np.angle(np.exp(1j * (yaw - ref_yaw)))))
     largest, after = HEADING_LIMITS[name]
     assert err.max() < largest and err[-1] < after, (err.max(), err[-1])
+
+
+@pytest.mark.parametrize("roll_deg, pitch_deg", [(0.0, 0.0), (20.0, 0.0), (10.0, -25.0),
+                                                 (40.0, 30.0)])
+def test_tilt_compensation_keeps_the_vertical_lift_of_the_linear_model(
+        roll_deg: float, pitch_deg: float) -> None:
+    """f_z = F_lift + m g along body z (NED: lift < 0). The linear models ask for a net
+    vertical force f_lin = F_lift,vertical + m g; tilted by theta only cos(theta) of the
+    lift is vertical, so (f_z - m g) cos(theta) must equal f_lin - m g, and linear()
+    inverts command(). Independent cosine: cos(roll) cos(pitch) (ZYX Euler angles)."""
+    from groundstation.control.base import TiltCompensation
+
+    weight = 0.6 * 9.81
+    phi, theta = math.radians(roll_deg), math.radians(pitch_deg)
+    q = quat_from_euler(phi, theta, math.radians(75.0))
+    cos_tilt = math.cos(phi) * math.cos(theta)
+    tilt = TiltCompensation(weight, enabled=True)
+    for f_lin in (-1.5, 0.0, 2.0):
+        f_z = tilt.command(f_lin, q)
+        assert (f_z - weight) * cos_tilt == pytest.approx(f_lin - weight, abs=1e-12)
+        assert tilt.linear(f_z) == pytest.approx(f_lin, abs=1e-12)
+    off = TiltCompensation(weight, enabled=False)
+    assert off.command(1.25, q) == 1.25 and off.linear(1.25) == 1.25

@@ -157,6 +157,40 @@ class HeadingFrame:
         return math.sin(0.5 * wrap_angle(self.yaw - yaw_ref))
 
 
+class TiltCompensation:
+    """The vertical-force command corrected for tilt, and its inverse for the input history.
+
+    The linear models' vertical force ``f`` acts along the body z axis; hovering tilted
+    by an angle with cosine ``c``, only ``c f`` holds the weight ``m g``. With the
+    compensation on, the controller's linear output ``f_lin`` becomes
+    ``f_z = (f_lin - m g (1 - c)) / c``: the weight's share is scaled up, the rest
+    passes unchanged. ``c`` (the body z axis's vertical component,
+    ``q0^2 - q1^2 - q2^2 + q3^2``, quaternion scalar first) is floored at 0.5 (60 degrees).
+
+    weight : m g [N]; enabled : False passes ``f_lin`` through unchanged
+    """
+
+    def __init__(self, weight: float, enabled: bool) -> None:
+        self.weight = weight
+        self.enabled = enabled
+        self.cos_tilt = 1.0
+        """The cosine used by the last :meth:`command` (used again by :meth:`linear`)."""
+
+    def command(self, f_lin: float, quaternion: FloatArray) -> float:
+        """The vertical force to command [N] for the linear output ``f_lin`` [N] at the
+        attitude ``quaternion`` (4,) [q0, q1, q2, q3]."""
+        q0, q1, q2, q3 = quaternion.tolist()
+        c = max(q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3, 0.5)
+        self.cos_tilt = c
+        return (f_lin - self.weight * (1.0 - c)) / c if self.enabled else f_lin
+
+    def linear(self, f_z: float) -> float:
+        """The linear output [N] a sent vertical force ``f_z`` [N] stands for (the inverse
+        of the last :meth:`command`)."""
+        c = self.cos_tilt
+        return c * f_z + self.weight * (1.0 - c) if self.enabled else f_z
+
+
 class OutputIntegrator:
     """Integrated output errors ``r - y`` of ``[x, y, z, heading]`` for an LQR with integral
     action, kept with x and y in *earth* axes and handed to the gain in the heading frame.

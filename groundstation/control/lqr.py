@@ -42,6 +42,7 @@ from groundstation.control.augmented import N_VEHICLE, OUTPUT_ROWS, DesignModel,
 from groundstation.control.base import (
     HeadingFrame,
     OutputIntegrator,
+    TiltCompensation,
     fill_heading_state,
     wrap_angle,
 )
@@ -148,9 +149,7 @@ class LqrController:
                           else DisturbanceObserver(Phi, Gamma, dt, disturbance_tau))
         self._learn = True
         self._half_inv_g = 0.5 / self.params.g
-        self._tilt_comp = tilt_compensation
-        self._weight = self.params.mass * self.params.g
-        self._cos_tilt = 1.0
+        self._tilt = TiltCompensation(self.params.mass * self.params.g, tilt_compensation)
         lim = limits or CommandLimits.from_stick_params(StickParams.from_quadrotor(self.params))
         self._lo = [*lim.omega_min.tolist(), lim.f_z_min]  # saturation, as Python floats:
         self._hi = [*lim.omega_max.tolist(), lim.f_z_max]  # cheaper than numpy on 4 values
@@ -241,20 +240,14 @@ class LqrController:
         if obs is not None:
             obs.commit(u)  # the linear model's input: the compensation below is not in it
         self._learn = True  # until sent() says otherwise
-        q0, q1, q2, q3 = estimate.quaternion.tolist()
-        c = max(q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3, 0.5)
-        self._cos_tilt = c
-        f_z = float(u[3])
-        if self._tilt_comp:
-            f_z = (f_z - self._weight * (1.0 - c)) / c
-        return ControlOutput(omega=u[0:3].copy(), f_z=f_z)
+        return ControlOutput(omega=u[0:3].copy(),
+                             f_z=self._tilt.command(float(u[3]), estimate.quaternion))
 
     def sent(self, output: ControlOutput, automatic: bool) -> None:
         """Record what went out (as the linear model's input) for the input-history
         states and the observer; the observer learns from the next step only if this
         command was ``automatic`` on every channel."""
-        c = self._cos_tilt
-        f_lin = c * output.f_z + self._weight * (1.0 - c) if self._tilt_comp else output.f_z
+        f_lin = self._tilt.linear(output.f_z)
         w = output.omega
         u = np.array([w[0], w[1], w[2], f_lin])
         if self._observer is not None:

@@ -45,6 +45,7 @@ from groundstation.control.augmented import N_VEHICLE, DesignModel, InputHistory
 from groundstation.control.base import (
     HeadingFrame,
     OutputIntegrator,
+    TiltCompensation,
     fill_heading_state,
     wrap_angle,
 )
@@ -121,10 +122,8 @@ class FeedforwardLqr:
         self._frame = HeadingFrame()
         self._u = np.zeros(4)
         self._u_ff = np.zeros(4)
-        self._tilt_comp = tilt_compensation
-        self._weight = p.mass * p.g
+        self._tilt = TiltCompensation(p.mass * p.g, tilt_compensation)
         self._inv_2g = 0.5 / p.g
-        self._cos_tilt = 1.0
         lim = limits or CommandLimits.from_stick_params(StickParams.from_quadrotor(p))
         self._lo = [*lim.omega_min.tolist(), lim.f_z_min]  # saturation, as Python floats:
         self._hi = [*lim.omega_max.tolist(), lim.f_z_max]  # cheaper than numpy on 4 values
@@ -171,19 +170,13 @@ class FeedforwardLqr:
             self._integral.update(frame, e, self._xi, undo=True)
         self._history.propose(u)
         self._ff_history.propose(u_ff)
-        q0, q1, q2, q3 = estimate.quaternion.tolist()
-        c = max(q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3, 0.5)
-        self._cos_tilt = c
-        f_z = float(u[3])
-        if self._tilt_comp:
-            f_z = (f_z - self._weight * (1.0 - c)) / c
-        return ControlOutput(omega=u[0:3].copy(), f_z=f_z)
+        return ControlOutput(omega=u[0:3].copy(),
+                             f_z=self._tilt.command(float(u[3]), estimate.quaternion))
 
     def sent(self, output: ControlOutput, automatic: bool) -> None:
         """Record what really went out, as the model's input (the vertical force before
         the tilt compensation), for the earlier-input states of the next steps."""
-        c = self._cos_tilt
-        f_lin = c * output.f_z + self._weight * (1.0 - c) if self._tilt_comp else output.f_z
+        f_lin = self._tilt.linear(output.f_z)
         w = output.omega
         self._history.record(np.array([w[0], w[1], w[2], f_lin]))
 

@@ -85,9 +85,7 @@ class MinJerkPath:
         yaw: float | FloatArray | None = None,
         name: str = "path",
     ) -> None:
-        t = np.asarray(times, dtype=float).reshape(-1)
-        p = np.asarray(points, dtype=float)
-        check_knots(t, p, periodic)
+        t, p = check_knots(times, points, periodic)
         self.name = name
         self.periodic = periodic
         self.duration = float(t[-1])

@@ -144,9 +144,7 @@ class PiecewiseLinear:
         yaw: float | FloatArray | None = None,
         name: str = "path",
     ) -> None:
-        t = np.asarray(times, dtype=float).reshape(-1)
-        p = np.asarray(points, dtype=float)
-        check_knots(t, p, periodic)
+        t, p = check_knots(times, points, periodic)
         self.name = name
         self.periodic = periodic
         self.duration = float(t[-1])
@@ -253,8 +251,12 @@ def knot_headings(yaw: float | FloatArray | None, n: int) -> tuple[FloatArray, b
     return np.unwrap(yaws), False
 
 
-def check_knots(t: FloatArray, p: FloatArray, periodic: bool) -> None:
-    """Raise TrajectoryError unless the knots describe a valid path."""
+def check_knots(times: FloatArray | list[float], points: FloatArray | list[list[float]],
+                periodic: bool) -> tuple[FloatArray, FloatArray]:
+    """The knot times (N,) [s] and points (N, 3) [m] as float arrays; TrajectoryError
+    unless they describe a valid path."""
+    t = np.asarray(times, dtype=float).reshape(-1)
+    p = np.asarray(points, dtype=float)
     if t.ndim != 1 or t.size < 2:
         raise TrajectoryError(f"a path needs at least 2 knots, found {t.size}")
     if p.shape != (t.size, 3):
@@ -271,6 +273,7 @@ def check_knots(t: FloatArray, p: FloatArray, periodic: bool) -> None:
         )
     if periodic and not np.allclose(p[0], p[-1], atol=1e-9):
         raise TrajectoryError("a periodic path must end where it starts (closed loop)")
+    return t, p
 
 
 class FigureEight:
