@@ -2,7 +2,7 @@
 #
 # Build:  docker build -t groundstation .
 # Fly:    docker run --rm -it --init --network host --stop-timeout 30 \
-#             --device /dev/ttyUSB0 \
+#             --device /dev/ttyUSB0 --ulimit rtprio=10 \
 #             -v /etc/groundstation/lab.yaml:/etc/groundstation/lab.yaml:ro \
 #             -v gs-flightlogs:/var/lib/groundstation \
 #             groundstation
@@ -17,6 +17,11 @@
 #   publish the ports instead (-p 51001:51001/udp -p 5556:5556) and set
 #   telemetry.endpoint to tcp://*:5556 in lab.yaml (its default 127.0.0.1 is the
 #   container's own loopback).
+# * --ulimit rtprio=10 lets the daemon run its loop under the real-time FIFO policy
+#   (realtime.fifo_priority); without it the daemon warns and flies under the normal
+#   policy, which lets busy neighbours delay COMMANDs (README, "Real-time tuning").
+#   A kernel with real-time group scheduling (CONFIG_RT_GROUP_SCHED) also needs
+#   --cpu-rt-runtime=950000 (Docker's "realtime scheduler" documentation).
 # * --stop-timeout 30: `docker stop` sends SIGTERM, on which the daemon lands; the
 #   default 10 s before SIGKILL may be too short to land (see groundstation.service).
 #   A second SIGTERM (`docker kill -s TERM`) hands back to the pilot at once.

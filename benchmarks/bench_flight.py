@@ -126,6 +126,66 @@ def fly_once(base: GroundStationConfig, tmp: Path, k: int, seconds: float,
     return Flight(summary, vehicle.wire, cpu)
 
 
+CANARY = """
+import os, sys, time
+# Sleeps 1 ms at a time and prints every wake-up later than the threshold: the stalls of
+# the whole machine (a vCPU descheduled by the hypervisor, memory reclaim), as opposed to
+# those of the ground-station process. Real-time (FIFO 30, above the daemon and the
+# virtual vehicle) when permitted, so the --load spinners cannot delay it.
+threshold = float(sys.argv[1])
+try:
+    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(30))
+    print("fifo", flush=True)
+except OSError:
+    print("normal", flush=True)
+while True:
+    t0 = time.monotonic()
+    time.sleep(0.001)
+    late = time.monotonic() - t0 - 0.001
+    if late > threshold:
+        print(f"{t0:.6f} {late:.6f}", flush=True)
+"""
+"""A process whose own wake-ups show when the machine, not the daemon, stalled."""
+
+CANARY_THRESHOLD_S = 0.02
+"""A canary wake-up this late [s] is a stall of the machine."""
+
+
+class Canary:
+    """The :data:`CANARY` process and the stalls it reported (start [monotonic s], length [s])."""
+
+    def __init__(self) -> None:
+        self.stalls: list[tuple[float, float]] = []
+        self.policy = "?"
+        """'fifo' if the canary runs real-time (its stalls are the machine's), else 'normal'."""
+        self._proc = subprocess.Popen([sys.executable, "-c", CANARY, str(CANARY_THRESHOLD_S)],
+                                      stdout=subprocess.PIPE, text=True)
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self._proc.stdout is not None
+        self.policy = self._proc.stdout.readline().strip()
+        for line in self._proc.stdout:
+            t0, late = (float(v) for v in line.split())
+            self.stalls.append((t0, late))
+
+    def stop(self) -> None:
+        self._proc.kill()
+        self._proc.wait()
+        self._reader.join(timeout=1.0)
+
+    def overlaps(self, start: float, end: float) -> bool:
+        """Whether the canary was stalled at some time within [start, end] [monotonic s]."""
+        return any(t0 < end and t0 + 0.001 + late > start for t0, late in self.stalls)
+
+
+def steal_s() -> float:
+    """CPU time the hypervisor gave to others while this VM wanted it, all CPUs [s]."""
+    fields = Path("/proc/stat").read_text().splitlines()[0].split()
+    return int(fields[8]) / os.sysconf("SC_CLK_TCK") if len(fields) > 8 else float("nan")
+
+
 def start_load(n: int) -> list[subprocess.Popen[bytes]]:
     """N busy processes spinning in pure Python (one core each, if they get it)."""
     return [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
@@ -167,11 +227,36 @@ def report_one(flight: Flight, args: argparse.Namespace, samples: list[tuple[flo
               f"over {samples[-1][0] / 60:.1f} min")
 
 
-def report_wire(flights: list[Flight], load: int) -> bool:
+def long_gaps(flight: Flight) -> list[tuple[float, float]]:
+    """The flight's vehicle-side COMMAND gaps over :data:`GAP_LIMIT_S`: (start [monotonic
+    s], length [s])."""
+    first, last = flight.span
+    t, mask = flight.wire.command_in, flight.wire.command_mask
+    gaps = np.diff(t)
+    long = (mask[:-1] != 0) & (t[:-1] >= first) & (t[:-1] <= last) & (gaps > GAP_LIMIT_S)
+    return [(float(t0), float(g)) for t0, g in zip(t[:-1][long], gaps[long], strict=True)]
+
+
+def vehicle_stalled(flight: Flight, start: float, end: float, period: float) -> bool:
+    """Whether the virtual vehicle's own DATA stream had a hole of over 2.5 DATA periods
+    overlapping [start, end] [monotonic s]: the vehicle process did not run then (it runs
+    under the real-time policy above the daemon, so the daemon cannot have held it off),
+    and a COMMAND gap it measured is the machine's stall, not the ground station's."""
+    out = flight.wire.data_out
+    holes = np.flatnonzero(np.diff(out) > 2.5 * period)
+    return any(out[k] < end and out[k + 1] > start for k in holes)
+
+
+def report_wire(flights: list[Flight], load: int, canary: Canary,
+                data_period_s: float = 0.01) -> bool:
     """The vehicle-side figures over every flight; True if the targets are met."""
     lat = np.concatenate([f.latencies() for f in flights])
     gaps = np.concatenate([f.gaps() for f in flights])
     over = int(np.sum(gaps > GAP_LIMIT_S))
+    long = [g for f in flights for g in long_gaps(f)]
+    machine = sum(canary.overlaps(t, t + g) for t, g in long)
+    stalled = sum(vehicle_stalled(f, t, t + g, data_period_s)
+                  for f in flights for t, g in long_gaps(f))
     gc_full = max(f.summary.collector.longest_full_s for f in flights)
     gc_young = max(f.summary.collector.longest_young_s for f in flights)
     outcomes = {o: sum(f.summary.outcome.name == o for f in flights)
@@ -183,6 +268,16 @@ def report_wire(flights: list[Flight], load: int) -> bool:
     print(f"  COMMAND gap  p50 {ms(gaps, 50)} ms  p99 {ms(gaps, 99)} ms  max {ms(gaps, 100)} ms; "
           f"over {1e3 * GAP_LIMIT_S:.0f} ms: {over} (target 0); watchdog expiries "
           f"(> 100 ms): {int(np.sum(gaps > 0.1))}")
+    if long:
+        print(f"  gaps over {1e3 * GAP_LIMIT_S:.0f} ms: "
+              + ", ".join(f"{1e3 * g:.0f} ms" for _, g in long)
+              + f"; {stalled} while the virtual vehicle's own DATA stream stopped too (the "
+              f"vehicle process did not run: the machine stalled), {machine} while the "
+              f"canary process was stalled")
+    print(f"  the canary process ({canary.policy} policy) woke up over "
+          f"{1e3 * CANARY_THRESHOLD_S:.0f} ms late "
+          f"{len(canary.stalls)} times, longest "
+          f"{1e3 * max((late for _, late in canary.stalls), default=0.0):.0f} ms")
     print(f"  outcomes {outcomes}; keep-alive resends "
           f"{sum(f.summary.keepalive_resends for f in flights)}; longest collector pause: "
           f"full {1e3 * gc_full:.2f} ms, young {1e3 * gc_young:.2f} ms")
@@ -218,6 +313,8 @@ def main() -> int:
             None if args.cpu_latency_us == "none" else int(args.cpu_latency_us),
     })
     load = start_load(args.load)
+    canary = Canary()
+    steal0 = steal_s()
     flights: list[Flight] = []
     samples: list[tuple[float, float]] = []
     load0 = os.getloadavg()[0]
@@ -232,14 +329,15 @@ def main() -> int:
                       f"{1e3 * float(np.max(gaps, initial=0.0)):5.1f} ms, load average "
                       f"{os.getloadavg()[0]:.2f}", flush=True)
     finally:
+        canary.stop()
         for proc in load:
             proc.kill()
             proc.wait()
     if args.flights == 1:
         report_one(flights[0], args, samples, args.command_rate, base.serial.data_period_ms)
-    met = report_wire(flights, args.load)
+    met = report_wire(flights, args.load, canary, base.serial.data_period_ms / 1000.0)
     print(f"load average at the start {load0:.2f}, at the end {os.getloadavg()[0]:.2f}; "
-          f"flight logs in {tmp}")
+          f"CPU time stolen by the hypervisor {steal_s() - steal0:.2f} s; flight logs in {tmp}")
     return 0 if met and all(f.summary.success for f in flights) else 1
 
 

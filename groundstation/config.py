@@ -637,6 +637,11 @@ class RealtimeConfig(_Model):
     cpu_dma_latency_us: int | None = Field(0, ge=0)
     # PM QoS wake-up latency bound held while flying; 0 keeps the CPUs out of idle
     # states (measured: 3-6x cheaper ticks on a VM). null leaves the idle states alone
+    fifo_priority: int | None = Field(10, ge=1, le=98)
+    # SCHED_FIFO priority of the flight loop and its threads while flying (needs
+    # CAP_SYS_NICE or LimitRTPRIO; without, a warning and the normal policy). Under two
+    # busy processes the normal policy let COMMAND gaps reach 114 ms (issue 14). Below
+    # the virtual vehicle's sim.fifo_priority; null asks for nothing
     switch_interval_ms: float = Field(0.5, gt=0.0, le=5.0)
     # GIL switch interval while flying: the longest a reader thread can delay a tick
     paced_gc: bool = True
@@ -680,6 +685,10 @@ class SimConfig(_Model):
 
     seed: int = 1
     dt_s: float = Field(0.002, gt=0, le=0.01)  # 2 ms fixed step, issue 5 (rate loop, motors)
+    fifo_priority: int | None = Field(20, ge=1, le=98)
+    # SCHED_FIFO priority of the real-time virtual lab: it stands for hardware, which the
+    # ground-station PC's load never stalls; above realtime.fifo_priority. Without the
+    # privilege a warning and the normal policy; null asks for nothing
     # Where the simulated vehicle differs from the vehicle model (all off by default:
     # the virtual lab is then the design model; `gs eval --perturb` draws them)
     rate_loop_tau_s: NonNegFloat | None = None

@@ -56,6 +56,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from groundstation.config import SimConfig
+from groundstation.loop.realtime import fifo_priority
 from groundstation.loop.signals import on_stop_signals
 from sim_device.lab import LabStats, VirtualLab
 from sim_device.wire import WireRecord, WireTiming
@@ -218,7 +220,9 @@ def run_sim_device(
             f"virtual Vicon -> udp://{target[0]}:{target[1]} at {lab.params.vicon.rate_hz:g} Hz")
         if on_ready is not None:
             on_ready(info)
-        with on_stop_signals(lambda _sig: stop.set()):
+        priority = (config.sim if config.sim is not None else SimConfig()).fifo_priority
+        with on_stop_signals(lambda _sig: stop.set()), \
+                fifo_priority(priority, who="virtual vehicle"):
             start = time.monotonic()
             _loop(lab, _Io(pty, sock, target, wire, unplug), stop, tick, duration, counters,
                   start)

@@ -1,10 +1,14 @@
-"""The daemon's requests to the OS: PM QoS CPU wake-up latency and the GIL switch interval."""
+"""The daemon's requests to the OS and the interpreter: PM QoS CPU wake-up latency, the
+real-time scheduling policy, the GIL switch interval, the paced garbage collector."""
 
 from __future__ import annotations
 
 import os
+import resource
 import struct
+import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -15,6 +19,7 @@ from groundstation.loop.realtime import (
     CPU_DMA_LATENCY,
     CollectorPacer,
     cpu_latency_request,
+    fifo_priority,
     switch_interval,
 )
 
@@ -142,3 +147,64 @@ def test_new_config_keys_defaults() -> None:
     with pytest.raises(ConfigError) as err:
         validate_config({"safety": {"second_signal_after_s": -1, "battery_grace_s": 0}})
     assert "second_signal_after_s" in str(err.value) and "battery_grace_s" in str(err.value)
+
+
+def _may_use_fifo() -> bool:
+    """Whether this process may take SCHED_FIFO (root, CAP_SYS_NICE or RLIMIT_RTPRIO)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+    except OSError:
+        return False
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    return True
+
+
+@pytest.mark.skipif(not _may_use_fifo(), reason="needs CAP_SYS_NICE or RLIMIT_RTPRIO")
+def test_fifo_priority_holds_for_the_thread_and_its_children_and_is_restored() -> None:
+    seen: list[tuple[int, int]] = []
+
+    def child() -> None:  # os.sched_* on pid 0 read the calling thread (Linux)
+        seen.append((os.sched_getscheduler(0), os.sched_getparam(0).sched_priority))
+
+    before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    with fifo_priority(7) as held:
+        assert held
+        assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority) == \
+            (os.SCHED_FIFO, 7)
+        thread = threading.Thread(target=child)
+        thread.start()
+        thread.join()
+    assert seen == [(os.SCHED_FIFO, 7)]  # the serial and Vicon threads inherit it
+    assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority) == before
+
+
+REFUSED = """
+import os, resource, sys
+from structlog.testing import capture_logs
+from groundstation.loop.realtime import fifo_priority
+resource.setrlimit(resource.RLIMIT_RTPRIO, (0, 0))
+if os.geteuid() == 0:
+    os.setuid(65534)  # nobody: root's capabilities (CAP_SYS_NICE) are gone
+with capture_logs() as logs, fifo_priority(10) as held:
+    ran = True
+    policy = os.sched_getscheduler(0)
+print(held, ran, policy == os.SCHED_OTHER, [e["event"] for e in logs])
+"""
+
+
+def test_fifo_priority_without_the_privilege_warns_and_runs_the_block() -> None:
+    """An unprivileged user (RLIMIT_RTPRIO 0, no CAP_SYS_NICE: as root, the child runs as
+    nobody) gets a warning and the normal policy, never an error."""
+    out = subprocess.run([sys.executable, "-c", REFUSED], capture_output=True, text=True,
+                         timeout=60, check=False)
+    assert out.returncode == 0, out.stderr
+    held, ran, normal, events = out.stdout.split(" ", 3)
+    assert (held, ran, normal) == ("False", "True", "True")
+    assert "real-time priority not held" in events
+
+
+def test_fifo_priority_none_asks_nothing() -> None:
+    before = os.sched_getscheduler(0)
+    with fifo_priority(None) as held:
+        assert not held and os.sched_getscheduler(0) == before
+    assert resource.getrlimit(resource.RLIMIT_RTPRIO) is not None

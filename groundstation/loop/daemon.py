@@ -20,9 +20,10 @@ Timing per tick (recorded, summarised in :class:`FlightSummary`):
 * DATA interval: the spacing of DATA frames as received, a property of the link
   and the vehicle, reported beside the loop's own figures.
 
-While flying, the daemon holds a PM QoS request for CPU wake-up latency
-(``realtime.cpu_dma_latency_us``, default 0 us) so the CPUs do not drop into
-deep idle states between DATA samples, shortens the interpreter's thread
+While flying, the daemon runs its loop and threads under the real-time FIFO
+policy (``realtime.fifo_priority``, 10) when it may, holds a PM QoS request for CPU
+wake-up latency (``realtime.cpu_dma_latency_us``, default 0 us) so the CPUs do not
+drop into deep idle states between DATA samples, shortens the interpreter's thread
 switch interval to ``realtime.switch_interval_ms`` (0.5 ms; default 5 ms) so a
 reader thread holding the GIL cannot delay a tick by more, and paces the garbage
 collector (``realtime.paced_gc``): start-up objects frozen, full collections only
@@ -69,6 +70,7 @@ from groundstation.loop.realtime import (
     CollectorPacer,
     CollectorStats,
     cpu_latency_request,
+    fifo_priority,
     switch_interval,
 )
 from groundstation.loop.recorder import FlightRecorder
@@ -210,6 +212,8 @@ class FlightDaemon:
         notifier = SdNotifier.from_env()
         with ExitStack() as stack:
             stack.callback(notifier.stopping, "stopping: vehicle handed back")
+            # first: the serial, Vicon and ZeroMQ threads started below inherit it
+            stack.enter_context(fifo_priority(cfg.realtime.fifo_priority))
             link = SerialLink.from_config(cfg.serial)
             stack.callback(link.close)  # sends the final COMMAND with ctrl mask 0
             vicon = ViconClient.from_config(cfg.vicon, cfg.safety).start()

@@ -1,5 +1,6 @@
 """What the daemon asks of the OS and the interpreter while it flies: CPU wake-up latency,
-GIL switching, and a garbage collector that stays off the COMMAND path.
+a real-time scheduling policy, GIL switching, and a garbage collector that stays off the
+COMMAND path.
 
 The loop sleeps about 8 ms of every 10 ms waiting for the next DATA sample. A CPU
 that spends those 8 ms in a deep idle state (or, on a virtual machine, a vCPU
@@ -14,6 +15,10 @@ written to it, no CPU enters an idle state whose exit latency exceeds the bound
 file is closed, also when the process dies, so a crashed daemon cannot leave
 the machine burning power. The device is root-only by default;
 ``config/99-groundstation.rules`` gives the ``groundstation`` group access.
+
+Under the normal scheduling policy the loop shares the cores with every busy process
+on the machine; :func:`fifo_priority` runs it (and the threads it starts: the serial
+reader, the keep-alive, the Vicon reader) under the real-time FIFO policy instead.
 
 CPython's cyclic garbage collector stops every thread of the process while it runs
 (it holds the interpreter lock), the keep-alive thread included. See
@@ -74,6 +79,45 @@ def cpu_latency_request(max_us: int | None, device: Path = CPU_DMA_LATENCY) -> I
         yield True
     finally:
         os.close(fd)
+
+
+@contextmanager
+def fifo_priority(priority: int | None, *, who: str = "flight loop") -> Iterator[bool]:
+    """Run the calling thread, and every thread it starts inside the block, under the
+    ``SCHED_FIFO`` real-time policy at ``priority`` (1-99; restored afterwards).
+
+    Yields True while the policy is held. A thread under the normal policy shares the
+    cores with every busy process: with two pure-Python spinners on the 2-core VM the
+    vehicle saw COMMAND gaps of 55-114 ms, three times past its 100 ms watchdog, in 30
+    flights (issue 14), and a plain process sleeping 1 ms at a time woke up 100 ms late.
+    A real-time thread preempts them as soon as it wakes. It needs ``CAP_SYS_NICE`` or
+    an ``RLIMIT_RTPRIO`` of at least ``priority`` (systemd ``LimitRTPRIO=``, or
+    ``@groundstation - rtprio 20`` in /etc/security/limits.d); without either a warning
+    names the reason and the block runs under the normal policy (yields False). The
+    kernel's real-time throttling (``sched_rt_runtime_us``, 95 % by default) keeps a
+    runaway real-time thread from locking a core. ``priority=None`` asks nothing.
+    Threads started in the block inherit the policy (Linux, ``PTHREAD_INHERIT_SCHED``).
+    """
+    if priority is None or not hasattr(os, "sched_setscheduler"):
+        yield False
+        return
+    policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as exc:
+        log.warning(f"real-time priority not held: the {who} shares the cores with every "
+                    "busy process", priority=priority, reason=exc.strerror or str(exc),
+                    hint="needs CAP_SYS_NICE or LimitRTPRIO (see config/groundstation.service)")
+        yield False
+        return
+    log.info("real-time priority held", policy="SCHED_FIFO", priority=priority, who=who)
+    try:
+        yield True
+    finally:
+        try:
+            os.sched_setscheduler(0, policy, param)
+        except OSError as exc:  # cannot happen for a lower priority; never raise on the way out
+            log.warning("scheduling policy not restored", reason=str(exc))
 
 
 @contextmanager
