@@ -309,6 +309,9 @@ def main() -> int:
         "telemetry.endpoint": "tcp://127.0.0.1:*", "logging.flight_log_dir": str(tmp),
         "telemetry.control_endpoint": "tcp://127.0.0.1:*",
         "logging.level": "warning",
+        # the virtual vehicle stands for hardware, which the PC's load cannot stall:
+        # real-time above the daemon, so --load delays only the ground station
+        "sim.fifo_priority": 20,
         "realtime.cpu_dma_latency_us":
             None if args.cpu_latency_us == "none" else int(args.cpu_latency_us),
     })

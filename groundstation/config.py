@@ -640,8 +640,8 @@ class RealtimeConfig(_Model):
     fifo_priority: int | None = Field(10, ge=1, le=98)
     # SCHED_FIFO priority of the flight loop and its threads while flying (needs
     # CAP_SYS_NICE or LimitRTPRIO; without, a warning and the normal policy). Under two
-    # busy processes the normal policy let COMMAND gaps reach 114 ms (issue 14). Below
-    # the virtual vehicle's sim.fifo_priority; null asks for nothing
+    # busy processes the normal policy let COMMAND gaps reach 114 ms (issue 14); null
+    # asks for nothing
     switch_interval_ms: float = Field(0.5, gt=0.0, le=5.0)
     # GIL switch interval while flying: the longest a reader thread can delay a tick
     paced_gc: bool = True
@@ -685,10 +685,11 @@ class SimConfig(_Model):
 
     seed: int = 1
     dt_s: float = Field(0.002, gt=0, le=0.01)  # 2 ms fixed step, issue 5 (rate loop, motors)
-    fifo_priority: int | None = Field(20, ge=1, le=98)
-    # SCHED_FIFO priority of the real-time virtual lab: it stands for hardware, which the
-    # ground-station PC's load never stalls; above realtime.fifo_priority. Without the
-    # privilege a warning and the normal policy; null asks for nothing
+    fifo_priority: int | None = Field(None, ge=1, le=98)
+    # SCHED_FIFO priority of the real-time virtual lab (null: the normal policy). 20
+    # makes it stand for hardware that the PC's load never stalls (benchmarks/
+    # bench_flight.py), but it costs the daemon on the same cores: in a demo flight
+    # without the PM QoS request the daemon's DATA->COMMAND p99 rose from 2 to 13 ms
     # Where the simulated vehicle differs from the vehicle model (all off by default:
     # the virtual lab is then the design model; `gs eval --perturb` draws them)
     rate_loop_tau_s: NonNegFloat | None = None
