@@ -14,6 +14,7 @@ a collector pause is measured in the collecting thread's CPU time. Speed figures
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
 import signal
@@ -23,7 +24,7 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +56,17 @@ def lab_config(tmp_path: Path, **overrides: object) -> GroundStationConfig:
         "logging.flight_log_dir": str(tmp_path / "logs"),
         "sim.truth_file": str(tmp_path / "truth.npz"), **overrides,
     })
+
+
+@contextlib.contextmanager
+def vehicle_process(tmp_path: Path) -> Iterator[tuple[SimDeviceProcess, GroundStationConfig]]:
+    """`gs sim-device` in a process of its own (it sees the daemon's pauses as the real
+    X-3D would) and the lab configuration pointing at its pty."""
+    cfg = lab_config(tmp_path)
+    cfg_file = tmp_path / "lab.yaml"
+    cfg_file.write_text(dump_config(cfg), encoding="utf-8")
+    with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as vehicle:
+        yield vehicle, apply_overrides(cfg, {"serial.port": vehicle.pty_path})
 
 
 def wait_until(predicate: Callable[[], bool], timeout: float, what: str) -> None:
@@ -124,11 +136,7 @@ def test_object_churn_does_not_stall_the_commands(tmp_path: Path) -> None:
     """Finding 3: a full collection (~64 ms) stalled the keep-alive and the vehicle's
     watchdog expired in the air. The virtual vehicle runs in its own process here, so it
     sees the daemon's pauses as the real X-3D would."""
-    cfg = lab_config(tmp_path)
-    cfg_file = tmp_path / "lab.yaml"
-    cfg_file.write_text(dump_config(cfg), encoding="utf-8")
-    with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as vehicle:
-        cfg = apply_overrides(cfg, {"serial.port": vehicle.pty_path})
+    with vehicle_process(tmp_path) as (vehicle, cfg):
         daemon = FlightDaemon(cfg, duration_s=6.0)
         with Churn() as churn, CollectorWatch() as watch:
             summary = daemon.run()
@@ -246,11 +254,7 @@ def test_a_second_daemon_on_a_flying_vehicles_port_is_refused_and_writes_nothing
     """Finding 7: a second `gs fly` on the port of a vehicle in the air failed on the
     Vicon bind and, on its way out, sent ctrl mask 0: 6 ms with the pilot. The vehicle
     runs in its own process and stamps every frame that reaches it."""
-    cfg = lab_config(tmp_path)
-    cfg_file = tmp_path / "lab.yaml"
-    cfg_file.write_text(dump_config(cfg), encoding="utf-8")
-    with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as vehicle:
-        cfg = apply_overrides(cfg, {"serial.port": vehicle.pty_path})
+    with vehicle_process(tmp_path) as (vehicle, cfg):
         first = FlightDaemon(cfg, duration_s=6.0)
         thread, out = fly_in_thread(first)
         try:

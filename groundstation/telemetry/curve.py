@@ -20,15 +20,18 @@ halves present, 40-character Z85 keys, a secret key that belongs to its public k
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import zmq
 import zmq.auth
 from zmq.utils import z85
 
 from groundstation.errors import TelemetryError
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -143,32 +146,29 @@ def _read_certificate(path: Path) -> tuple[bytes, bytes | None]:
     return _z85_key(public), secret
 
 
+def _load(what: str, path: str | os.PathLike[str], read: Callable[[str | os.PathLike[str]], T]
+          ) -> T:
+    """``read(path)``, its ValueError raised again as a TelemetryError naming ``what``."""
+    try:
+        return read(path)
+    except ValueError as exc:
+        raise TelemetryError(f"{what} {str(path)!r}: {exc}") from None
+
+
 def load_server_keys(secret_file: str | os.PathLike[str],
                      clients_dir: str | os.PathLike[str]) -> CurveServer:
     """The daemon's key pair and the authorised clients' public keys (``*.key``).
 
     Raises TelemetryError naming the file or directory that cannot be used.
     """
-    try:
-        public, secret = read_key_pair(secret_file)
-    except ValueError as exc:
-        raise TelemetryError(f"control server key {str(secret_file)!r}: {exc}") from None
-    try:
-        clients = read_public_keys(clients_dir)
-    except ValueError as exc:
-        raise TelemetryError(f"control client keys {str(clients_dir)!r}: {exc}") from None
-    return CurveServer(public, secret, clients)
+    public, secret = _load("control server key", secret_file, read_key_pair)
+    return CurveServer(public, secret,
+                       _load("control client keys", clients_dir, read_public_keys))
 
 
 def load_client_keys(secret_file: str | os.PathLike[str],
                      server_public_file: str | os.PathLike[str]) -> CurveClient:
     """A client's key pair and the server's public key; TelemetryError naming a bad file."""
-    try:
-        public, secret = read_key_pair(secret_file)
-    except ValueError as exc:
-        raise TelemetryError(f"client key {str(secret_file)!r}: {exc}") from None
-    try:
-        server = read_public_key(server_public_file)
-    except ValueError as exc:
-        raise TelemetryError(f"server key {str(server_public_file)!r}: {exc}") from None
-    return CurveClient(public, secret, server)
+    public, secret = _load("client key", secret_file, read_key_pair)
+    return CurveClient(public, secret,
+                       _load("server key", server_public_file, read_public_key))
