@@ -253,10 +253,9 @@ def report_wire(flights: list[Flight], load: int, canary: Canary,
     lat = np.concatenate([f.latencies() for f in flights])
     gaps = np.concatenate([f.gaps() for f in flights])
     over = int(np.sum(gaps > GAP_LIMIT_S))
-    long = [g for f in flights for g in long_gaps(f)]
-    machine = sum(canary.overlaps(t, t + g) for t, g in long)
-    stalled = sum(vehicle_stalled(f, t, t + g, data_period_s)
-                  for f in flights for t, g in long_gaps(f))
+    long = [(f, t, g) for f in flights for t, g in long_gaps(f)]
+    machine = sum(canary.overlaps(t, t + g) for _, t, g in long)
+    stalled = sum(vehicle_stalled(f, t, t + g, data_period_s) for f, t, g in long)
     gc_full = max(f.summary.collector.longest_full_s for f in flights)
     gc_young = max(f.summary.collector.longest_young_s for f in flights)
     outcomes = {o: sum(f.summary.outcome.name == o for f in flights)
@@ -270,7 +269,7 @@ def report_wire(flights: list[Flight], load: int, canary: Canary,
           f"(> 100 ms): {int(np.sum(gaps > 0.1))}")
     if long:
         print(f"  gaps over {1e3 * GAP_LIMIT_S:.0f} ms: "
-              + ", ".join(f"{1e3 * g:.0f} ms" for _, g in long)
+              + ", ".join(f"{1e3 * g:.0f} ms" for _, _, g in long)
               + f"; {stalled} while the virtual vehicle's own DATA stream stopped too (the "
               f"vehicle process did not run: the machine stalled), {machine} while the "
               f"canary process was stalled")
