@@ -1,4 +1,7 @@
-# Ground-station flight daemon image (no dev extras: no pytest, mypy, plotting).
+# Ground-station flight daemon image (no dev extras: no pytest, mypy, plotting), and
+# without the virtual lab: sim_device is not copied, so the image has no `gs sim-device`,
+# `gs eval` or `gs fly --demo` (they say the virtual lab is not installed). Fly the
+# virtual lab from a checkout (`make demo`).
 #
 # Build:  docker build -t groundstation .
 # Fly:    docker run --rm -it --init --network host --stop-timeout 30 \
@@ -6,7 +9,6 @@
 #             -v /etc/groundstation/lab.yaml:/etc/groundstation/lab.yaml:ro \
 #             -v gs-flightlogs:/var/lib/groundstation \
 #             groundstation
-# Demo:   docker run --rm -it groundstation fly --config /etc/groundstation/sim.yaml --demo
 #
 # Notes for the lab:
 # * --device /dev/ttyUSB0 passes the XBee/USB-serial adapter; the node keeps the
@@ -42,8 +44,8 @@ FROM python:3.11-slim AS build
 WORKDIR /src
 COPY pyproject.toml README.md ./
 COPY groundstation ./groundstation
-COPY sim_device ./sim_device
-# Wheels for the package and its runtime dependencies only.
+# Wheels for the package and its runtime dependencies only (the virtual lab, sim_device/,
+# stays out: the package finder finds no sim_device here).
 RUN python -m pip wheel --no-cache-dir --wheel-dir /wheels .
 
 FROM python:3.11-slim
@@ -60,7 +62,7 @@ COPY --from=build /wheels /wheels
 # hadolint ignore=DL3013
 RUN python -m pip install --no-index --find-links /wheels groundstation \
     && rm -rf /wheels
-COPY config/lab.yaml config/sim.yaml /etc/groundstation/
+COPY config/lab.yaml /etc/groundstation/
 
 # By name so the dialout membership from /etc/group reads clearly.
 # hadolint ignore=DL3066

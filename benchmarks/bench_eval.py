@@ -26,9 +26,9 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from groundstation.config import load_config  # noqa: E402
-from groundstation.evaluation import run_eval  # noqa: E402
-from groundstation.evaluation.perturb import parse_seeds  # noqa: E402
 from groundstation.logs import configure_logging  # noqa: E402
+from sim_device.evaluation import run_eval  # noqa: E402
+from sim_device.evaluation.perturb import parse_seeds  # noqa: E402
 
 
 def main() -> int:

@@ -46,6 +46,11 @@ def _fail(message: str, code: int) -> typer.Exit:
     return typer.Exit(code)
 
 
+fail = _fail
+"""``raise fail(message, code)``: print ``error: message`` and exit with ``code`` (for
+commands a lab adds, :func:`_add_lab_commands`)."""
+
+
 def _checked_config(path: Path, overrides: dict[str, Any] | None = None) -> GroundStationConfig:
     """The configuration a command runs with: the file, the CLI overrides, and the files it
     names (waypoints, gain, CURVE keys) checked. ConfigError naming each problem."""
@@ -141,23 +146,6 @@ def fly(
     raise typer.Exit(fly_command(cfg, duration_s=duration, demo=demo, echo=typer.echo))
 
 
-@app.command("sim-device")
-def sim_device(
-    config: ConfigOption,
-    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds.")] = None,
-    truth_file: Annotated[Path | None, typer.Option(help="Ground-truth .npz path.")] = None,
-) -> None:
-    """Run the virtual X-3D (pty) and virtual Vicon (UDP) in real time until Ctrl-C.
-
-    Prints the pty path to use as ``--serial-port`` and the Vicon UDP target, and
-    writes the ground truth on exit (also on SIGINT/SIGTERM).
-    """
-    cfg = load(config)
-    from sim_device.realtime import run_sim_device
-
-    run_sim_device(cfg, truth_file=truth_file, duration=duration, announce=typer.echo)
-
-
 @app.command()
 def export(
     log: Annotated[Path, typer.Argument(help="Flight-log directory or its flight.npy.")],
@@ -192,40 +180,6 @@ def replay(
         raise _fail(str(exc), 1) from exc
     for line in report.lines():
         typer.echo(line)
-
-
-@app.command("eval")
-def evaluate(
-    config: ConfigOption,
-    fast: Annotated[bool, typer.Option(
-        help="In-process on the simulated clock (default: real time over the pty and UDP).")]
-        = False,
-    out: Annotated[Path, typer.Option(help="Report directory.")] = Path("eval_out"),
-    scenario: Annotated[list[str] | None, typer.Option(
-        help="Fly only these scenarios (repeatable; default all).")] = None,
-    perturb: Annotated[list[str] | None, typer.Option(
-        help="Fly every scenario on the plant drawn for this seed (repeatable; a range "
-             "1-5 or a list 1,4); the report gives the worst case over the seeds.")] = None,
-) -> None:
-    """Fly the thesis's Ch. 11 flight tests and issue 13's in the virtual lab; write a report.
-
-    Metrics come from the virtual lab's ground truth; the report is ``report.md`` with
-    PNG figures mirroring Fig. 11.1-11.8 and ``metrics.json``. With ``--perturb`` the
-    virtual vehicle differs from the design model (rate gains, rate-loop lag, mass,
-    thrust, delay, IMU errors: see groundstation/evaluation/perturb.py).
-    """
-    from groundstation.evaluation import run_eval
-    from groundstation.evaluation.perturb import parse_seeds
-
-    cfg = load(config)
-    try:
-        seeds = parse_seeds(perturb or [])
-        report = run_eval(cfg, fast=fast, out_dir=out, scenarios=scenario, progress=typer.echo,
-                          perturb=seeds)
-    except GroundStationError as exc:
-        raise _fail(str(exc), 2 if isinstance(exc, ConfigError) else 1) from exc
-    typer.echo(f"{len(report.outcomes)} scenarios in {report.wall_s:.0f} s: {report.report_md}, "
-               f"{report.metrics_json}, {len(report.figures)} figures")
 
 
 @app.command()
@@ -396,3 +350,19 @@ def main() -> None:  # pragma: no cover - console entry point alternative
     except GroundStationError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise SystemExit(1) from exc
+
+
+def _add_lab_commands() -> None:
+    """Add the installed virtual lab's commands (``gs sim-device``, ``gs eval``; see
+    :mod:`groundstation.lab`). Without a lab (the flight image) ``gs`` has none."""
+    from groundstation.lab import LabNotInstalledError, virtual_lab
+
+    try:
+        plugin = virtual_lab()
+    except LabNotInstalledError:
+        return
+    for name, command in plugin.commands():
+        app.command(name)(command)
+
+
+_add_lab_commands()

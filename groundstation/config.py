@@ -7,7 +7,7 @@ whose message names the field path, the offending value and the reason, one
 line per problem. Unknown keys are errors (a typo must not silently fall back
 to a default), and so are a key given twice, a number that is a boolean, a
 fraction where an integer is meant, and any infinite or NaN number (see
-:class:`_Model`). :func:`check_files` checks the files a configuration names.
+:class:`ConfigModel`). :func:`check_files` checks the files a configuration names.
 
 Every numeric default names its source in a comment: a thesis equation or
 table ("eq. 3.7", "Table 6.2"), the spec, or the reason it was chosen where the
@@ -36,6 +36,8 @@ from pydantic import (
     ConfigDict,
     Field,
     GetCoreSchemaHandler,
+    SerializeAsAny,
+    SkipValidation,
     ValidationError,
     ValidationInfo,
     field_validator,
@@ -81,7 +83,7 @@ def _strict_scalars(schema: Any) -> None:
             _strict_scalars(value)
 
 
-class _Model(BaseModel):
+class ConfigModel(BaseModel):
     """Base: unknown keys are errors, instances are immutable, numbers are numbers.
 
     Every number must be finite (``allow_inf_nan=False``: ``.inf`` is no time, rate or
@@ -102,6 +104,9 @@ class _Model(BaseModel):
         schema = handler(source)
         _strict_scalars(schema)
         return schema
+
+
+_Model = ConfigModel  # the name the sections below were written with
 
 
 def _matrix(value: list[float] | list[list[float]], n: int, name: str) -> np.ndarray:
@@ -141,7 +146,7 @@ def _all_channels() -> list[Channel]:
 
 
 # --------------------------------------------------------------------------- serial link
-class SerialConfig(_Model):
+class SerialConfig(ConfigModel):
     """The serial link to the X-3D (``spec/x3d-serial-protocol.md``)."""
 
     port: str = "/dev/ttyUSB0"  # the lab's XBee adapter; a pty path or pyserial URL also works
@@ -173,7 +178,7 @@ class SerialConfig(_Model):
         return sum(1 << SENSOR_BLOCKS.index(name) for name in self.sensors)
 
 
-class ChannelsConfig(_Model):
+class ChannelsConfig(ConfigModel):
     """Which channels the ground station controls (the rest stay with the RC pilot)."""
 
     auto: list[Channel] = Field(default_factory=_all_channels)
@@ -187,7 +192,7 @@ class ChannelsConfig(_Model):
 
 
 # --------------------------------------------------------------------------- Vicon
-class RotationConfig(_Model):
+class RotationConfig(ConfigModel):
     """A fixed rotation given as intrinsic X-Y-Z Euler angles in degrees."""
 
     euler_xyz_deg: Vec3 = Field(default_factory=lambda: [180.0, 0.0, 0.0])
@@ -203,7 +208,7 @@ Box = tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
 """An axis-aligned box ``((x_min, x_max), (y_min, y_max), (z_min, z_max))``, NED [m]."""
 
 
-class ViconConfig(_Model):
+class ViconConfig(ConfigModel):
     """The Vicon UDP object stream (``spec/vicon-udp.md``)."""
 
     bind_address: str = "0.0.0.0"
@@ -245,7 +250,7 @@ class ViconConfig(_Model):
 
 
 # --------------------------------------------------------------------------- vehicle
-class VehicleConfig(_Model):
+class VehicleConfig(ConfigModel):
     """The X-3D model parameters (thesis Ch. 3 and 6)."""
 
     mass_kg: PositiveFloat = 0.60
@@ -313,7 +318,7 @@ class VehicleConfig(_Model):
 
 
 # --------------------------------------------------------------------------- estimator
-class EstimatorConfig(_Model):
+class EstimatorConfig(ConfigModel):
     """The IMU-driven EKF (thesis Ch. 7). Sensor variances come from the vehicle section."""
 
     gyro_bias_walk: PositiveFloat = 1e-6
@@ -349,7 +354,7 @@ class EstimatorConfig(_Model):
 
 
 # --------------------------------------------------------------------------- controller
-class LqrConfig(_Model):
+class LqrConfig(ConfigModel):
     """LQR with a reference model (thesis Ch. 9). Weights on the error e = r - y."""
 
     q_error: Weights4 = Field(default_factory=lambda: [8.0, 8.0, 20.0, 2.0])
@@ -377,7 +382,7 @@ class LqrConfig(_Model):
     # ideal-rate-loop model (Ch. 9)
 
 
-class PidConfig(_Model):
+class PidConfig(ConfigModel):
     """Cascaded position/velocity/attitude PID (thesis Ch. 8 baseline)."""
 
     position_kp: Vec3 = Field(default_factory=lambda: [0.8, 0.8, 1.2])  # [1/s], tuned
@@ -390,7 +395,7 @@ class PidConfig(_Model):
     max_tilt_deg: PositiveFloat = 20.0  # tilt command limit, tuned
 
 
-class HinfConfig(_Model):
+class HinfConfig(ConfigModel):
     """H-infinity controller (thesis Ch. 10): the loop uses a stored gain."""
 
     gain_file: Path | None = None
@@ -419,7 +424,7 @@ class HinfConfig(_Model):
     integral_limit: PositiveFloat = 2.0  # anti-windup clamp on each integrated error [m s]
 
 
-class LqrFfConfig(_Model):
+class LqrFfConfig(ConfigModel):
     """LQR with the feed-forward reference model (beyond the thesis, control/lqr_ff.py),
     designed on the vehicle with its rate loop and command delay. Weights on e = x - x_ref."""
 
@@ -443,7 +448,7 @@ class LqrFfConfig(_Model):
         return value
 
 
-class ControllerConfig(_Model):
+class ControllerConfig(ConfigModel):
     """Which controller flies and how it is tuned. Every controller is designed at the
     command period (1 / serial.command_rate_hz) and steps once per COMMAND."""
 
@@ -470,7 +475,7 @@ TrajectoryName = Literal[
 ]
 
 
-class TrajectoryConfig(_Model):
+class TrajectoryConfig(ConfigModel):
     """The trajectory flown after take-off (thesis Ch. 11)."""
 
     name: TrajectoryName = "square"
@@ -499,7 +504,7 @@ class TrajectoryConfig(_Model):
 
 
 # --------------------------------------------------------------------------- safety
-class SafetyConfig(_Model):
+class SafetyConfig(ConfigModel):
     """Limits and failsafe times the supervisor enforces."""
 
     volume_x: tuple[float, float] = (-1.5, 1.5)  # Table B.1 tracked volume [m]
@@ -580,7 +585,7 @@ def local_endpoint(endpoint: str) -> bool:
         return False
 
 
-class TelemetryConfig(_Model):
+class TelemetryConfig(ConfigModel):
     """The pyzmq PUB socket, and the control socket ``gs channels`` talks to.
 
     The control socket changes what flies, so it binds to loopback unless it
@@ -623,7 +628,7 @@ class TelemetryConfig(_Model):
         return value
 
 
-class LoggingConfig(_Model):
+class LoggingConfig(ConfigModel):
     """Console/JSON logging and the flight recorder."""
 
     level: Literal["debug", "info", "warning", "error"] = "info"
@@ -631,7 +636,7 @@ class LoggingConfig(_Model):
     flight_log_dir: Path = Path("flightlogs")
 
 
-class RealtimeConfig(_Model):
+class RealtimeConfig(ConfigModel):
     """What the daemon asks of the OS while it flies (see groundstation/loop/realtime.py)."""
 
     cpu_dma_latency_us: int | None = Field(0, ge=0)
@@ -651,78 +656,8 @@ class RealtimeConfig(_Model):
     # the air (issue 14). false: the interpreter's own collector
 
 
-# --------------------------------------------------------------------------- virtual lab
-class SimFaultsConfig(_Model):
-    """Fault injection in the virtual X-3D link, all off by default."""
-
-    corruption_rate: float = Field(0.0, ge=0.0, le=1.0)  # probability per byte of a bit flip
-    drop_rate: float = Field(0.0, ge=0.0, le=1.0)  # probability per DATA frame of dropping it
-    stall_at_s: NonNegFloat | None = None  # DATA stream stalls at this simulated time
-    stall_duration_s: NonNegFloat = 0.0
-    burst_delay_s: NonNegFloat = 0.0  # hold DATA and deliver it in bursts of this length
-    delay_s: NonNegFloat = 0.0  # constant extra delivery delay of every DATA frame
-
-
-class SimViconConfig(_Model):
-    """The virtual Vicon sender."""
-
-    target_address: str = "127.0.0.1"  # loopback: never send outside this machine
-    rate_hz: PositiveFloat = 100.0  # thesis lab 100 Hz; Ch. 11.1 also flew 10 and 1 Hz
-    latency_s: NonNegFloat = 0.005  # matches vicon.latency_s default
-    noise: bool = True  # Table 6.1 variances from the vehicle section
-    loss_encoding: Literal["missing", "zero", "held-identity"] = "held-identity"
-    # spec "lost tracking" encodings; held-identity is the thesis lab's (Alg. 2)
-    outages: list[tuple[float, float]] = Field(default_factory=list)  # (start_s, duration_s)
-    tilt_limit_deg: PositiveFloat = 60.0  # tracking lost beyond this tilt; markers occluded
-    pad_to: int | None = Field(1024, ge=80)  # Tracker's data block size (spec)
-    volume_x: tuple[float, float] = (-1.5, 1.5)  # tracked volume, Table B.1 [m]
-    volume_y: tuple[float, float] = (-1.5, 1.5)  # Table B.1
-    volume_z: tuple[float, float] = (-2.0, 0.05)  # Table B.1: 0..2 m height, NED
-
-
-class SimConfig(_Model):
-    """The virtual lab (sim_device/): plant, sensors, link and Vicon."""
-
-    seed: int = 1
-    dt_s: float = Field(0.002, gt=0, le=0.01)  # 2 ms fixed step, issue 5 (rate loop, motors)
-    fifo_priority: int | None = Field(None, ge=1, le=98)
-    # SCHED_FIFO priority of the real-time virtual lab (null: the normal policy). 20
-    # makes it stand for hardware that the PC's load never stalls (benchmarks/
-    # bench_flight.py), but it costs the daemon on the same cores: in a demo flight
-    # without the PM QoS request the daemon's DATA->COMMAND p99 rose from 2 to 13 ms
-    # Where the simulated vehicle differs from the vehicle model (all off by default:
-    # the virtual lab is then the design model; `gs eval --perturb` draws them)
-    rate_loop_tau_s: NonNegFloat | None = None
-    # true rate-loop time constant; null = vehicle.rate_loop_tau_s; 0 = an ideal rate loop
-    command_delay_s: NonNegFloat | None = None  # true transport delay; null = the vehicle's
-    k_rate_scale: Vec3 = Field(default_factory=lambda: [1.0, 1.0, 1.0])
-    # true rate gains / vehicle.k_rate, per axis (1.3 = a 30 % stronger rate response)
-    mass_scale: PositiveFloat = 1.0  # true mass / vehicle.mass_kg
-    motor_tau_s: NonNegFloat = 0.02
-    # lift lag of motors and rotors; the thesis gives none, 20 ms is typical of the class
-    battery_droop: float = Field(0.03, ge=0.0, lt=0.5)
-    # lift loss fraction over battery_droop_time_s (Ch. 5.2 observed a growing offset)
-    battery_droop_time_s: PositiveFloat = 300.0
-    thrust_scale: PositiveFloat = 1.0  # true lift / polynomial lift; 0.9 = 10 % thrust error
-    gyro_bias: Vec3 = Field(default_factory=lambda: [0.01, -0.02, 0.005])  # rad/s, plausible
-    acc_bias: Vec3 = Field(default_factory=lambda: [0.05, -0.05, 0.1])  # m/s^2, plausible
-    scale_error: NonNegFloat = 0.02  # max per-axis IMU scale error fraction ("a few %")
-    initial_position: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])  # on the floor
-    initial_yaw_deg: float = 0.0
-    pilot_thrust: int = Field(0, ge=0, le=4096)
-    # scripted pilot's thrust stick when it has the vehicle (0 = motors idle on the ground)
-    serial_enable: bool = True  # the RC serial-enable switch
-    pilot_holds_thrust: bool = True
-    # a pilot handed the vehicle in the air holds the thrust applied at that moment
-    rc_link: bool = True
-    battery_mv: int = Field(11800, ge=0)  # reported in STATUS (3S LiPo, spec worked frame)
-    truth_file: Path | None = None  # ground truth written here on exit
-    faults: SimFaultsConfig = SimFaultsConfig()
-    vicon: SimViconConfig = SimViconConfig()
-
-
 # --------------------------------------------------------------------------- top level
-class GroundStationConfig(_Model):
+class GroundStationConfig(ConfigModel):
     """The whole configuration file."""
 
     serial: SerialConfig = SerialConfig()
@@ -736,7 +671,9 @@ class GroundStationConfig(_Model):
     telemetry: TelemetryConfig = TelemetryConfig()
     logging: LoggingConfig = LoggingConfig()
     realtime: RealtimeConfig = RealtimeConfig()
-    sim: SimConfig | None = None  # present only in the virtual lab's configuration
+    sim: SkipValidation[SerializeAsAny[BaseModel] | None] = None
+    # the virtual lab's section (config/sim.yaml): the ground station never reads it;
+    # validate_config has the installed lab validate it (groundstation.lab)
 
 
 # --------------------------------------------------------------------------- loading
@@ -854,11 +791,35 @@ def validate_config(data: dict[str, Any], source: str = "<config>") -> GroundSta
     """Validate a parsed mapping; raise ConfigError naming every bad field."""
     if not isinstance(data, dict):
         _raise([("<root>", data, "the file must hold a mapping of sections")], source)
+    problems: list[tuple[str, object, str]] = []
+    sections = {key: value for key, value in data.items() if key != "sim"}
+    config = None
     try:
-        return GroundStationConfig.model_validate(data)
+        config = GroundStationConfig.model_validate(sections)
     except ValidationError as exc:
-        _raise(_problems(exc), source)
-        raise AssertionError("unreachable") from exc
+        problems += _problems(exc)
+    sim = _lab_section(data.get("sim"), problems)
+    if problems or config is None:
+        _raise(problems, source)
+        raise AssertionError("unreachable")
+    return config if sim is None else config.model_copy(update={"sim": sim})
+
+
+def _lab_section(data: object, problems: list[tuple[str, object, str]]) -> BaseModel | None:
+    """The ``sim:`` section validated by the installed virtual lab; its problems are
+    added to ``problems`` with paths under ``sim``."""
+    if data is None:
+        return None
+    from groundstation.lab import LabNotInstalledError, virtual_lab
+
+    try:
+        return virtual_lab().validate_section(data)
+    except ValidationError as exc:
+        problems += [("sim" if path == "<root>" else f"sim.{path}", value, reason)
+                     for path, value, reason in _problems(exc)]
+    except LabNotInstalledError as exc:
+        problems.append(("sim", "...", f"a virtual lab's section, but {exc}"))
+    return None
 
 
 def load_config(path: str | Path) -> GroundStationConfig:

@@ -113,7 +113,7 @@ class VirtualLab:
         self._ground_decoder = StreamDecoder(params.link.crc_profile)
         self._vicon_out: list[ViconDatagram] = []
         self.set_faults(drop_rate=params.faults.drop_rate, data_delay=params.faults.data_delay,
-                        burst_period=params.faults.burst_period)
+                        burst_delay_s=params.faults.burst_delay_s)
         if params.faults.stall_at is not None:
             self.stall_data(params.faults.stall_duration, start=params.faults.stall_at)
         self.firmware.update_control(0)
@@ -269,7 +269,7 @@ class VirtualLab:
 
     def set_faults(self, *, corruption_rate: float | None = None,
                    drop_rate: float | None = None, data_delay: float | None = None,
-                   burst_period: float | None = None) -> None:
+                   burst_delay_s: float | None = None) -> None:
         """Change link faults at run time (see :class:`~sim_device.params.FaultParams`)."""
         if corruption_rate is not None:
             self._corrupt_up.set_rate(corruption_rate)
@@ -278,8 +278,8 @@ class VirtualLab:
             self.downlink.drop_rate = drop_rate
         if data_delay is not None:
             self.downlink.delay_ns = seconds_to_ns(data_delay)
-        if burst_period is not None:
-            self.downlink.burst_ns = seconds_to_ns(burst_period)
+        if burst_delay_s is not None:
+            self.downlink.burst_ns = seconds_to_ns(burst_delay_s)
 
     def stats(self) -> LabStats:
         """A snapshot of the counters."""

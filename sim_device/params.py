@@ -22,7 +22,8 @@ import numpy.typing as npt
 from groundstation.errors import ConfigError
 
 if TYPE_CHECKING:
-    from groundstation.config import GroundStationConfig, SimConfig
+    from groundstation.config import GroundStationConfig
+    from sim_device.config import SimConfig
 
 Vec3 = tuple[float, float, float]
 LossEncoding = Literal["missing", "zero", "held-identity"]
@@ -51,7 +52,7 @@ class PlantParams:
     inflow : induced-inflow constant I_i [N s/m] (eq. 3.9)
     rate_tau : on-board rate loop as a first-order lag [s]; 0 = ideal (thesis model).
         0.064 s gives the 0.14 s 10-90 % rise of Fig. 3.8 (rise = 2.2 tau).
-    thrust_tau : motor/rotor lag of the lift [s]; 0 = instantaneous. Thesis silent;
+    motor_tau_s : motor/rotor lag of the lift [s]; 0 = instantaneous. Thesis silent;
         0.02 s is typical of ~10 cm brushless rotors.
     thrust_scale : true lift / polynomial lift (0.9 = 10 % less lift than the model)
     battery_droop : fraction of lift lost over ``battery_droop_time`` (Ch. 5.2), linear in time
@@ -70,7 +71,7 @@ class PlantParams:
     thrust_poly: tuple[float, ...] = _EQ37
     inflow: float = -0.423
     rate_tau: float = 0.064
-    thrust_tau: float = 0.02
+    motor_tau_s: float = 0.02
     thrust_scale: float = 1.0
     battery_droop: float = 0.03
     battery_droop_time: float = 300.0
@@ -84,8 +85,8 @@ class PlantParams:
                  "three finite gains")
         _require(len(self.thrust_poly) == 4 and _finite(*self.thrust_poly), "plant.thrust_poly",
                  self.thrust_poly, "four finite coefficients (a3, a2, a1, a0)")
-        _require(self.rate_tau >= 0 and self.thrust_tau >= 0, "plant.rate_tau/thrust_tau",
-                 (self.rate_tau, self.thrust_tau), "must be >= 0")
+        _require(self.rate_tau >= 0 and self.motor_tau_s >= 0, "plant.rate_tau/motor_tau_s",
+                 (self.rate_tau, self.motor_tau_s), "must be >= 0")
         _require(self.thrust_scale > 0, "plant.thrust_scale", self.thrust_scale, "must be > 0")
         _require(self.impact_time > 0, "plant.impact_time", self.impact_time, "must be > 0")
         _require(0 <= self.battery_droop < 0.5 and self.battery_droop_time > 0,
@@ -166,7 +167,7 @@ class FaultParams:
     corruption_rate : probability per byte of one flipped bit, both directions
     drop_rate : probability per DATA frame that the radio loses it whole
     stall_at, stall_duration : the DATA stream stops at this time for this long [s]
-    burst_period : hold DATA and release it every this many seconds (0 = off)
+    burst_delay_s : hold DATA and release it every this many seconds (0 = off)
     data_delay : extra constant delay of every DATA frame [s]
     """
 
@@ -174,14 +175,14 @@ class FaultParams:
     drop_rate: float = 0.0
     stall_at: float | None = None
     stall_duration: float = 0.0
-    burst_period: float = 0.0
+    burst_delay_s: float = 0.0
     data_delay: float = 0.0
 
     def __post_init__(self) -> None:
         _require(0 <= self.corruption_rate <= 1 and 0 <= self.drop_rate <= 1, "faults.rates",
                  (self.corruption_rate, self.drop_rate), "probabilities in [0, 1]")
-        _require(self.stall_duration >= 0 and self.burst_period >= 0 and self.data_delay >= 0,
-                 "faults.times", (self.stall_duration, self.burst_period, self.data_delay),
+        _require(self.stall_duration >= 0 and self.burst_delay_s >= 0 and self.data_delay >= 0,
+                 "faults.times", (self.stall_duration, self.burst_delay_s, self.data_delay),
                  "must be >= 0")
 
 
@@ -284,9 +285,9 @@ class LabParams:
         Fields without a configuration key keep their defaults:
         imu.gyro_saturation/pressure_noise and link.watchdog (the spec's 100 ms).
         """
-        from groundstation.config import SimConfig
+        from sim_device.config import sim_section
 
-        sim = config.sim if config.sim is not None else SimConfig()
+        sim = sim_section(config)
         f = sim.faults
         return cls(
             dt=sim.dt_s, seed=sim.seed, plant=_plant_params(config, sim),
@@ -298,7 +299,7 @@ class LabParams:
                             battery_mv=sim.battery_mv),
             faults=FaultParams(corruption_rate=f.corruption_rate, drop_rate=f.drop_rate,
                                stall_at=f.stall_at_s, stall_duration=f.stall_duration_s,
-                               burst_period=f.burst_delay_s, data_delay=f.delay_s),
+                               burst_delay_s=f.burst_delay_s, data_delay=f.delay_s),
             pilot=PilotParams(thrust=sim.pilot_thrust, serial_enable=sim.serial_enable,
                               rc_link=sim.rc_link, hold_thrust=sim.pilot_holds_thrust),
         )
@@ -311,7 +312,7 @@ def _plant_params(config: GroundStationConfig, sim: SimConfig) -> PlantParams:
     return PlantParams(
         mass=veh.mass_kg * sim.mass_scale, g=veh.gravity, k_rate=_vec3(k_rate),
         thrust_poly=tuple(veh.thrust_poly), inflow=veh.induced_inflow,
-        rate_tau=tau, thrust_tau=sim.motor_tau_s, thrust_scale=sim.thrust_scale,
+        rate_tau=tau, motor_tau_s=sim.motor_tau_s, thrust_scale=sim.thrust_scale,
         battery_droop=sim.battery_droop, battery_droop_time=sim.battery_droop_time_s,
         initial_position=_vec3(sim.initial_position),
         initial_yaw=math.radians(sim.initial_yaw_deg),

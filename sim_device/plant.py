@@ -8,7 +8,7 @@ State (plain Python floats, scalar math: a 2 ms step must be cheap):
 * ``omega`` body rates, FRD [rad/s]: the on-board rate loop's output, a
   first-order lag (time constant ``rate_tau``) behind the set point ``K * u``
 * ``lift`` body-z rotor force [N] (negative = up): a first-order lag
-  (``thrust_tau``) behind ``thrust_scale * F_lift(u_thrust)`` (eq. 3.7)
+  (``motor_tau_s``) behind ``thrust_scale * F_lift(u_thrust)`` (eq. 3.7)
 
 Dynamics, eq. 3.19-3.21::
 
@@ -87,8 +87,8 @@ class Plant:
         self.dt = dt
         self._a_rate = _lag_gain(dt, params.rate_tau)
         self._a_rate_half = _lag_gain(0.5 * dt, params.rate_tau)
-        self._a_lift = _lag_gain(dt, params.thrust_tau)
-        self._a_lift_half = _lag_gain(0.5 * dt, params.thrust_tau)
+        self._a_lift = _lag_gain(dt, params.motor_tau_s)
+        self._a_lift_half = _lag_gain(0.5 * dt, params.motor_tau_s)
         self._droop_rate = params.battery_droop / params.battery_droop_time
         a3, a2, a1, a0 = params.thrust_poly
         self._thrust_map = ThrustMap((a3, a2, a1, a0))

@@ -36,7 +36,6 @@ import contextlib
 import errno
 import fcntl
 import os
-import re
 import select
 import signal
 import socket
@@ -56,9 +55,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from groundstation.config import SimConfig
+from groundstation.config import dump_config
+from groundstation.lab import Announcement
 from groundstation.loop.realtime import fifo_priority
 from groundstation.loop.signals import on_stop_signals
+from sim_device.config import sim_section
 from sim_device.lab import LabStats, VirtualLab
 from sim_device.wire import WireRecord, WireTiming
 
@@ -81,6 +82,11 @@ class SimDeviceInfo:
     pty_path: str
     vicon_target: tuple[str, int]
     truth_file: Path
+
+    @property
+    def announcement(self) -> Announcement:
+        """The same, as the JSON line ``gs sim-device --json`` prints first."""
+        return Announcement(self.pty_path, self.vicon_target, self.truth_file)
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,8 +117,9 @@ class SimDeviceResult:
 
 def default_truth_path(config: GroundStationConfig) -> Path:
     """``sim.truth_file`` if set, else ``<logging.flight_log_dir>/sim-truth-<UTC time>.npz``."""
-    if config.sim is not None and config.sim.truth_file is not None:
-        return Path(config.sim.truth_file)
+    sim = sim_section(config)
+    if sim.truth_file is not None:
+        return Path(sim.truth_file)
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
     return Path(config.logging.flight_log_dir) / f"sim-truth-{stamp}.npz"
 
@@ -203,8 +210,8 @@ def run_sim_device(
     """
     stop = stop if stop is not None else threading.Event()
     lab = VirtualLab(config)
-    sim_vicon = config.sim.vicon.target_address if config.sim is not None else "127.0.0.1"
-    target = (sim_vicon, config.vicon.port)
+    sim = sim_section(config)
+    target = (sim.vicon.target_address, config.vicon.port)
     info_path = Path(truth_file) if truth_file is not None else default_truth_path(config)
     tick = lab.dt if tick is None else tick
     say = announce if announce is not None else (lambda _line: None)
@@ -216,13 +223,12 @@ def run_sim_device(
     start = wall0  # simulated time 0 on the monotonic clock; reset when the clock starts
     try:
         info = SimDeviceInfo(pty.path, target, info_path.with_suffix(".npz"))
-        say(f"virtual X-3D on {pty.path} ({lab.params.link.baud} baud); "
-            f"virtual Vicon -> udp://{target[0]}:{target[1]} at {lab.params.vicon.rate_hz:g} Hz")
         if on_ready is not None:
             on_ready(info)
-        priority = (config.sim if config.sim is not None else SimConfig()).fifo_priority
+        say(f"virtual X-3D on {pty.path} ({lab.params.link.baud} baud); "
+            f"virtual Vicon -> udp://{target[0]}:{target[1]} at {lab.params.vicon.rate_hz:g} Hz")
         with on_stop_signals(lambda _sig: stop.set()), \
-                fifo_priority(priority, who="virtual vehicle"):
+                fifo_priority(sim.fifo_priority, who="virtual vehicle"):
             start = time.monotonic()
             _loop(lab, _Io(pty, sock, target, wire, unplug), stop, tick, duration, counters,
                   start)
@@ -368,7 +374,8 @@ class SimDeviceProcess:
     process (its garbage collector, a loaded core) does not stall the vehicle's clock,
     so the vehicle's watchdog and the wire timing see the ground station as a real
     X-3D would. ``with SimDeviceProcess(config_file, truth_file) as dev:`` returns once
-    the pty exists (``dev.pty_path``); leaving the block stops the child with SIGINT,
+    the child announced itself (``gs sim-device --json``: ``dev.announcement``,
+    ``dev.pty_path``); leaving the block stops the child with SIGINT,
     waits for its truth file and loads the wire record into ``dev.wire``. The child
     has a session of its own: a Ctrl-C at the terminal reaches the ground station
     (which lands), not the vehicle.
@@ -380,31 +387,61 @@ class SimDeviceProcess:
     """
 
     def __init__(self, config_file: str | Path, truth_file: str | Path, *,
-                 gs: str | Path | None = None, timeout: float = 30.0) -> None:
+                 gs: str | Path | None = None, timeout: float = 30.0,
+                 duration: float | None = None, stderr: Path | None = None) -> None:
         exe = Path(gs) if gs is not None else Path(sys.executable).parent / "gs"
         command = [str(exe)] if exe.exists() else [
-            sys.executable, "-c", "from groundstation.cli import app; app()"]
+            sys.executable, "-c", "from groundstation.cli import main; main()"]
         self.truth_file = Path(truth_file)
         self._timeout = timeout
-        self._args = [*command, "sim-device", "--config", str(config_file),
+        self._stderr = stderr
+        self._args = [*command, "sim-device", "--json", "--config", str(config_file),
                       "--truth-file", str(self.truth_file)]
+        if duration is not None:  # bounds the child should this process die without stopping it
+            self._args += ["--duration", f"{duration:g}"]
         self._child: subprocess.Popen[str] | None = None
+        self._announcement: Announcement | None = None
         self.pty_path = ""
         self.output = ""
         """What the child printed after its first line (read when the block ends)."""
         self.wire: WireRecord | None = None
 
+    @classmethod
+    def for_config(cls, config: GroundStationConfig, workdir: Path) -> SimDeviceProcess:
+        """The lab for ``config``: its YAML written to ``workdir``, the truth to
+        :func:`default_truth_path` (``gs fly --demo``)."""
+        truth_file = default_truth_path(config)
+        truth_file.parent.mkdir(parents=True, exist_ok=True)
+        config_file = Path(workdir) / "sim.yaml"
+        config_file.write_text(dump_config(config), encoding="utf-8")
+        return cls(config_file, truth_file)
+
     def __enter__(self) -> SimDeviceProcess:
-        self._child = subprocess.Popen(self._args, stdout=subprocess.PIPE, text=True,
-                                       start_new_session=True)
+        if self._stderr is not None:
+            with self._stderr.open("w") as err:
+                self._child = subprocess.Popen(self._args, stdout=subprocess.PIPE, stderr=err,
+                                               text=True, start_new_session=True)
+        else:
+            self._child = subprocess.Popen(self._args, stdout=subprocess.PIPE, text=True,
+                                           start_new_session=True)
         assert self._child.stdout is not None
-        line = self._child.stdout.readline()
-        match = re.search(r"on (/dev/\S+) ", line)
-        if match is None:
+        ready, _, _ = select.select([self._child.stdout], [], [], self._timeout)
+        line = self._child.stdout.readline() if ready else ""
+        try:
+            self._announcement = Announcement.from_json(line)
+        except ValueError as exc:
             self.__exit__(None, None, None)
-            raise RuntimeError(f"gs sim-device did not start: {line!r}")
-        self.pty_path = match.group(1)
+            where = f"; see {self._stderr}" if self._stderr is not None else ""
+            raise RuntimeError(f"gs sim-device did not start: {line.strip()!r}{where}") from exc
+        self.pty_path = self._announcement.serial_port
         return self
+
+    @property
+    def announcement(self) -> Announcement:
+        """Where the child is, as it announced itself (inside the ``with`` block)."""
+        if self._announcement is None:
+            raise RuntimeError("the virtual lab is not running")
+        return self._announcement
 
     def __exit__(self, *exc_info: object) -> None:
         child = self._child

@@ -20,8 +20,8 @@ import yaml
 
 from groundstation.config import apply_overrides, dump_config, load_config, validate_config
 from groundstation.errors import ConfigError
-from groundstation.evaluation import run_eval
-from groundstation.evaluation.perturb import (
+from sim_device.evaluation import run_eval
+from sim_device.evaluation.perturb import (
     ACC_BIAS_MAX,
     COMMAND_DELAY_RANGE_S,
     GYRO_BIAS_MAX,
@@ -34,8 +34,8 @@ from groundstation.evaluation.perturb import (
     perturbation,
     plant_row,
 )
-from groundstation.evaluation.scenarios import select
-from groundstation.evaluation.suite import plant_for
+from sim_device.evaluation.scenarios import select
+from sim_device.evaluation.suite import plant_for
 from sim_device.params import LabParams
 
 REPO = Path(__file__).resolve().parents[1]

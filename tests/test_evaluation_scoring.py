@@ -17,9 +17,9 @@ import pytest
 
 from groundstation.evaluation.record import TRUTH_LAB, FlightRecord
 from groundstation.evaluation.scoring import flight_metrics, worst_case
-from groundstation.evaluation.targets import TARGETS, check_targets
 from groundstation.loop.supervisor import State
 from groundstation.model.quaternion import quat_from_euler
+from sim_device.evaluation.targets import TARGETS, check_targets
 
 H = 0.375  # half-side of the Ch. 11 square [m]
 CORNERS = np.array([[H, -H, -1.0], [H, H, -1.0], [-H, H, -1.0], [-H, -H, -1.0]])

@@ -28,11 +28,11 @@ import numpy as np
 import pytest
 
 from groundstation.config import load_config
-from groundstation.evaluation import EvalReport, run_eval
 from groundstation.evaluation.metrics import step_figures, track_clock
-from groundstation.evaluation.runner import simulate_model
-from groundstation.evaluation.scenarios import STEP_TIME_S, THESIS, select
 from groundstation.loop.supervisor import State
+from sim_device.evaluation import EvalReport, run_eval
+from sim_device.evaluation.runner import simulate_model
+from sim_device.evaluation.scenarios import STEP_TIME_S, THESIS, select
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 

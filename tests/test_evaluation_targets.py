@@ -1,6 +1,6 @@
 """Issue 13's targets, flown in CI: worst case over 5 perturbed vehicles.
 
-Every scenario with a target (:data:`groundstation.evaluation.targets.TARGETS`) flies
+Every scenario with a target (:data:`sim_device.evaluation.targets.TARGETS`) flies
 in-process on the plants of seeds 1-5 (`gs eval --fast --perturb 1-5`): rate gains
 +-30 % per axis, rate-loop time constant +-30 %, mass and thrust map +-15 %, command
 delay 5-30 ms, IMU scale errors and biases, Vicon at 10 Hz. The errors come from the
@@ -21,8 +21,8 @@ from pathlib import Path
 import pytest
 
 from groundstation.config import load_config
-from groundstation.evaluation import run_eval
-from groundstation.evaluation.targets import TARGETS, check_targets
+from sim_device.evaluation import run_eval
+from sim_device.evaluation.targets import TARGETS, check_targets
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 

@@ -182,7 +182,7 @@ def test_imu_bias_and_scale_error_show_in_the_mean() -> None:
 
 
 def test_accelerometer_saturates_at_14_and_adc_clips_at_12_bits() -> None:
-    lab = make_lab(plant=PlantParams(battery_droop=0.0, thrust_tau=0.0),
+    lab = make_lab(plant=PlantParams(battery_droop=0.0, motor_tau_s=0.0),
                    imu=ImuParams(gyro_scale=(0.0005, 0.0005, 0.0005)))
     lab.send(ConfigMsg(0x07, 10))
     lab.place((0.0, 0.0, -1.0))

@@ -112,11 +112,11 @@ def test_configured_stall() -> None:
 
 
 def test_bursty_and_delayed_delivery() -> None:
-    lab = streaming_lab(burst_period=0.1)
+    lab = streaming_lab(burst_delay_s=0.1)
     t = np.array([t for t, _ in lab.advance(2.0)])
     np.testing.assert_allclose(t / 0.1, np.round(t / 0.1), atol=1e-9)
     assert len(t) == pytest.approx(200, abs=10)
-    lab.set_faults(burst_period=0.0, data_delay=0.05)
+    lab.set_faults(burst_delay_s=0.0, data_delay=0.05)
     lab.advance(0.2)
     t = np.array([t for t, _ in lab.advance(1.0)])
     # sample on the 10 ms grid + 31-byte frame time + 50 ms

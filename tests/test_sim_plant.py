@@ -65,7 +65,7 @@ def test_hover_at_the_polynomial_root() -> None:
 @pytest.mark.parametrize("thrust_scale", [1.0, 0.9])
 def test_climb_reaches_the_induced_inflow_equilibrium(thrust_scale: float) -> None:
     u = 2600
-    lab = lab_with(thrust_tau=0.0, thrust_scale=thrust_scale)
+    lab = lab_with(motor_tau_s=0.0, thrust_scale=thrust_scale)
     lab.set_pilot(Sticks(thrust=u))
     lab.place((0.0, 0.0, -1.0))
     lab.advance(3.0)
@@ -156,7 +156,7 @@ def test_command_takes_effect_after_transmission_and_transport_delay() -> None:
 
 
 def test_battery_droop_scales_lift_linearly() -> None:
-    lab = lab_with(battery_droop=0.03, battery_droop_time=10.0, thrust_tau=0.0)
+    lab = lab_with(battery_droop=0.03, battery_droop_time=10.0, motor_tau_s=0.0)
     lab.set_pilot(Sticks(thrust=2000))
     lab.place((0.0, 0.0, -1.0))
     lab.advance(5.0)
@@ -166,7 +166,7 @@ def test_battery_droop_scales_lift_linearly() -> None:
 def test_plant_step_matches_the_ground_station_model() -> None:
     """One plant step equals groundstation.model's RK4 step (eq. 3.19-3.22) without lags."""
     rng = np.random.default_rng(7)
-    params = PlantParams(rate_tau=0.0, thrust_tau=0.0, battery_droop=0.0)
+    params = PlantParams(rate_tau=0.0, motor_tau_s=0.0, battery_droop=0.0)
     model = QuadrotorModel(QuadrotorParams(mass=MASS, g=G, inflow=I_I))
     for _ in range(20):
         plant = Plant(params, 0.002)

@@ -345,3 +345,31 @@ def test_force_ends_the_flight_as_a_failsafe() -> None:
     assert sup.terminal and sup.transitions[-1].failsafe
     assert logs[0]["log_level"] == "warning" and logs[0]["new"] == "LINK_LOST"
     assert sup.force(t + 2, State.ABORTED, "late") is State.LINK_LOST  # terminal stays
+
+
+def test_transition_kinds_decide_what_a_report_explains() -> None:
+    """The report shows the reason of every transition that is not a step of a nominal
+    flight, from the supervisor's transition kinds (issue 15), not from its wording."""
+    from groundstation.evaluation.report import states_line
+
+    nominal = Supervisor()
+    t = airborne(nominal)
+    nominal.update(obs(t + 1, trajectory_done=True, **FLYING_AT_1M))
+    nominal.update(obs(t + 3, height_above_ground_m=0.01))
+    nominal.update(obs(t + 3.6, height_above_ground_m=0.01))
+    nominal.update(obs(t + 4.2, height_above_ground_m=0.0))
+    assert nominal.state is State.DONE
+    assert all(tr.nominal and not tr.failsafe for tr in nominal.transitions)
+    assert states_line(nominal.transitions) == "TAKEOFF -> TRACK -> LAND -> DISARM -> DONE"
+
+    held = Supervisor()
+    t = airborne(held)
+    held.update(obs(t + 0.6, vicon_age_s=0.6, **FLYING_AT_1M))
+    held.update(obs(t + 0.7, vicon_age_s=0.01, **FLYING_AT_1M))
+    held.update(obs(t + 0.8, stop_requests=1, **FLYING_AT_1M))
+    kinds = [(tr.new, tr.nominal, tr.failsafe) for tr in held.transitions[2:]]
+    assert kinds == [(State.HOLD, False, True), (State.TRACK, False, False),
+                     (State.LAND, False, False)]
+    line = states_line(held.transitions)
+    assert line.startswith("TAKEOFF -> TRACK -> HOLD (")
+    assert "TRACK (Vicon back)" in line and line.count("(") == 3

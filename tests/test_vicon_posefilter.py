@@ -100,7 +100,7 @@ def test_gaps_duplicates_and_reordering() -> None:
 
 
 def test_restart_after_large_backward_jump() -> None:
-    f = PoseFilter(NAME, restart_backward_frames=1000)
+    f = PoseFilter(NAME, restart_backjump_frames=1000)
     assert confirmed(f, 50_000, 0.00) is not None
     assert feed(f, 49_000, 0.01) is None  # jump of exactly 1000: still "old"
     assert feed(f, 48_999, 0.02) is not None  # 1001 back: a Tracker restart
@@ -363,7 +363,7 @@ def test_from_lab_config() -> None:
         cfg.max_speed_m_s,
         cfg.max_rotation_rate_rad_s,
     )
-    assert f.restart_backward_frames == cfg.restart_backjump_frames
+    assert f.restart_backjump_frames == cfg.restart_backjump_frames
     assert f.rate.min_rate_hz == 8.0
     assert f.rate.max_rate_hz == pytest.approx(1.2 * 100.0)  # MAX_RATE_FACTOR * expected rate
     # safety.volume_x/y/z (Table B.1) grown by vicon.plausibility_margin_m (0.5 m)

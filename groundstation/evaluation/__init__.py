@@ -1,43 +1,26 @@
-"""Evaluation: the flights of thesis Ch. 11 and issue 13 in the virtual lab, scored from
-ground truth.
+"""Scoring a flight: one recorded flight's metrics, figures and report.
 
-``gs eval`` is :func:`run_eval` (the suite of :mod:`.scenarios`, in-process with the
-simulated clock or in real time over the pty and UDP; with ``perturb`` seeds on the
-vehicles :func:`perturbation` draws, reduced by :func:`worst_case` and checked against
-issue 13's targets by :func:`check_targets`); ``gs report LOG`` is
-:func:`report_flight` (one recorded flight, with or without the virtual lab's
-truth). Both write ``report.md``, ``metrics.json`` and PNG figures.
+``gs report LOG`` is :func:`report_flight`: a flight log (real, or flown in the
+virtual lab with the lab's truth file), aligned with its reference and, where
+there is one, the ground truth (:mod:`.record`); metrics (:mod:`.metrics`,
+:mod:`.scoring`) and the flight figure (:mod:`.plotting`). It writes
+``report.md``, ``metrics.json`` and ``flight.png``.
 
->>> from groundstation.config import load_config
->>> from groundstation.evaluation import run_eval
->>> report = run_eval(load_config("config/sim.yaml"), fast=True, out_dir="eval")  # doctest: +SKIP
->>> report.metrics["square-lqr-cv"]["lag_s"]  # doctest: +SKIP
+The evaluation suite that flies the thesis's Ch. 11 tests in the virtual lab
+(``gs eval``) is the lab's: :mod:`sim_device.evaluation`, built on this package.
 """
 
-from groundstation.evaluation.perturb import perturbation
 from groundstation.evaluation.record import FlightRecord, record_from_log, record_from_trace
 from groundstation.evaluation.report import FlightReport, report_flight
-from groundstation.evaluation.scenarios import SUITE, Scenario, select
 from groundstation.evaluation.scoring import WorstCase, flight_metrics, worst_case
-from groundstation.evaluation.suite import EvalReport, ScenarioOutcome, run_eval
-from groundstation.evaluation.targets import TARGETS, check_targets
 
 __all__ = [
-    "SUITE",
-    "TARGETS",
-    "EvalReport",
     "FlightRecord",
     "FlightReport",
-    "Scenario",
-    "ScenarioOutcome",
     "WorstCase",
-    "check_targets",
     "flight_metrics",
-    "perturbation",
     "record_from_log",
     "record_from_trace",
     "report_flight",
-    "run_eval",
-    "select",
     "worst_case",
 ]

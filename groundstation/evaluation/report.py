@@ -3,7 +3,7 @@
 :func:`report_flight` is the whole of ``gs report``: one logged flight (real or
 against the virtual lab, with its truth file) -> ``report.md``,
 ``metrics.json`` and ``flight.png``. The suite's report
-(:mod:`groundstation.evaluation.suite`) uses the same writers.
+(:mod:`sim_device.evaluation.suite`) uses the same writers.
 """
 
 from __future__ import annotations
@@ -84,14 +84,10 @@ def transitions_json(transitions: Sequence[Transition], t0: float) -> list[list[
     return [[round(tr.t - t0, 3), tr.old.name, tr.new.name, tr.reason] for tr in transitions]
 
 
-NOMINAL_REASONS = ("preflight checks passed", "take-off height reached", "trajectory complete",
-                   "on the floor", "landed and disarmed: vehicle handed back", "")
-
-
 def states_line(transitions: Sequence[Transition]) -> str:
     """``TAKEOFF -> HOLD (Vicon lost ...) -> ...``: the states, with the reason of every
-    transition that is not part of a nominal flight."""
-    return " -> ".join(tr.new.name + ("" if tr.reason in NOMINAL_REASONS else f" ({tr.reason})")
+    transition that is not a step of a nominal flight (``Transition.nominal``)."""
+    return " -> ".join(tr.new.name + ("" if tr.nominal or not tr.reason else f" ({tr.reason})")
                        for tr in transitions)
 
 

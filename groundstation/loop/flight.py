@@ -28,7 +28,7 @@ from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
 
-from groundstation.config import GroundStationConfig, apply_overrides, dump_config
+from groundstation.config import GroundStationConfig, apply_overrides
 from groundstation.errors import ConfigError, GroundStationError
 from groundstation.loop.core import FlightCore
 from groundstation.loop.daemon import FlightDaemon, FlightSummary
@@ -129,23 +129,21 @@ def fly_command(config: GroundStationConfig, *, duration_s: float | None = None,
 
 def _start_virtual_lab(config: GroundStationConfig, stack: ExitStack, echo: Echo
                        ) -> tuple[GroundStationConfig, Path]:
-    """Start `gs sim-device` in a child process for the block ``stack`` closes; return the
-    configuration pointing at its pty and its truth file. A process of its own, as the
-    vehicle is: a pause of this one (a loaded machine) cannot stop the vehicle's clock."""
-    from sim_device.realtime import SimDeviceProcess, default_truth_path
+    """Start the installed virtual lab (:func:`groundstation.lab.virtual_lab`) in a child
+    process for the block ``stack`` closes; return the configuration pointing at its pty
+    and its truth file. A process of its own, as the vehicle is: a pause of this one (a
+    loaded machine) cannot stop the vehicle's clock."""
+    from groundstation.lab import virtual_lab
 
-    truth_file = default_truth_path(config)
-    truth_file.parent.mkdir(parents=True, exist_ok=True)
+    plugin = virtual_lab()
     workdir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="gs-demo-")))
-    config_file = workdir / "sim.yaml"
-    config_file.write_text(dump_config(config), encoding="utf-8")
     try:
-        device = stack.enter_context(SimDeviceProcess(config_file, truth_file))
+        lab = stack.enter_context(plugin.start(config, workdir)).announcement
     except RuntimeError as exc:
         raise GroundStationError(f"the virtual lab did not start: {exc}") from exc
-    target = config.sim.vicon.target_address if config.sim is not None else "127.0.0.1"
-    echo(f"virtual lab: X-3D on {device.pty_path}, Vicon -> udp://{target}:{config.vicon.port}")
-    return apply_overrides(config, {"serial.port": device.pty_path}), truth_file
+    address, port = lab.vicon_target
+    echo(f"virtual lab: X-3D on {lab.serial_port}, Vicon -> udp://{address}:{port}")
+    return apply_overrides(config, {"serial.port": lab.serial_port}), lab.truth_file
 
 
 def _plot(log_dir: str, truth_file: Path | None, echo: Echo) -> None:

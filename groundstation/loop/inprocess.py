@@ -1,4 +1,4 @@
-"""Fly the flight core against the virtual lab on its simulated clock.
+"""Fly the flight core against a virtual lab on its simulated clock.
 
 Everything between the two is real except the transport: COMMAND and CONFIG
 frames are encoded to bytes and written into the virtual X-3D, DATA frames come
@@ -7,7 +7,9 @@ the same pose filter as on the lab PC. Only the pty, the UDP socket and the wall
 clock are left out, so a flight runs many times faster than real time and is
 the same, bit for bit, for a given seed.
 
-Used by the tests, the evaluation suite (``gs eval --fast``) and ``gs replay``.
+The lab is anything that satisfies :class:`groundstation.lab.Lab`; by default the
+installed virtual lab builds one for the configuration (:func:`groundstation.lab.virtual_lab`).
+Used by the tests and the virtual lab's evaluation suite (``gs eval --fast``).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from groundstation.asctec.messages import ConfigMsg, DataMsg
 from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
+from groundstation.lab import Lab, virtual_lab
 from groundstation.loop.core import FlightCore, TickResult
 from groundstation.loop.inputs import DataFrontEnd
 from groundstation.loop.recorder import FlightRecorder
@@ -31,7 +34,6 @@ from groundstation.loop.supervisor import State, Transition
 from groundstation.loop.ticklog import TickLogger
 from groundstation.types import FloatArray, Pose
 from groundstation.vicon.posefilter import PoseFilter
-from sim_device.lab import VirtualLab
 
 Event = Callable[["InProcessFlight"], None]
 """A scripted action at a simulated time: inject a fault in ``flight.lab``, move the
@@ -71,7 +73,7 @@ class FlightResult:
     success: bool
     transitions: list[Transition]
     trace: dict[str, FloatArray]
-    lab: VirtualLab
+    lab: Lab
     core: FlightCore
 
     def during(self, state: State) -> np.ndarray:
@@ -86,18 +88,19 @@ def _rotate_to_earth(q: FloatArray, v: FloatArray) -> FloatArray:
 
 
 class InProcessFlight:
-    """One flight of :class:`FlightCore` against a :class:`VirtualLab`, stepped by hand.
+    """One flight of :class:`FlightCore` against a :class:`~groundstation.lab.Lab`, stepped
+    by hand (``lab`` None: the installed virtual lab for ``config``).
 
     :meth:`run` flies to a terminal state; :meth:`step` advances one DATA period
     for tests that interleave their own checks.
     """
 
-    def __init__(self, config: GroundStationConfig, *, lab: VirtualLab | None = None,
+    def __init__(self, config: GroundStationConfig, *, lab: Lab | None = None,
                  controller: Controller | None = None, trajectory: Trajectory | None = None,
                  duration_s: float | None = None,
                  recorder: FlightRecorder | None = None) -> None:
         self.config = config
-        self.lab = lab if lab is not None else VirtualLab(config)
+        self.lab: Lab = lab if lab is not None else virtual_lab().in_process(config)
         self.core = FlightCore(config, controller=controller, trajectory=trajectory,
                                duration_s=duration_s)
         self._profile = config.serial.crc_profile
@@ -200,7 +203,7 @@ class InProcessFlight:
                             self.lab, self.core)
 
 
-def fly_in_process(config: GroundStationConfig, *, lab: VirtualLab | None = None,
+def fly_in_process(config: GroundStationConfig, *, lab: Lab | None = None,
                    controller: Controller | None = None, trajectory: Trajectory | None = None,
                    duration_s: float | None = None, max_time_s: float = 300.0,
                    events: Sequence[tuple[float, Event]] = (),

@@ -175,13 +175,20 @@ class Observation:
 
 @dataclass(frozen=True, slots=True)
 class Transition:
-    """One state change: when, from, to, why, and whether a failsafe made it."""
+    """One state change: when, from, to, why, and what kind of change it is.
+
+    failsafe : a failsafe made it (the flight's outcome is then FAILSAFE)
+    nominal : a step every normal flight takes (preflight passed, take-off height
+        reached, trajectory complete, on the floor, disarmed); a report shows the
+        reason only of the other transitions (failsafes, a stop on request, Vicon back)
+    """
 
     t: float
     old: State
     new: State
     reason: str
     failsafe: bool = False
+    nominal: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -249,11 +256,12 @@ class Supervisor:
         """Seconds since the last transition."""
         return t - self._t_state
 
-    def _go(self, t: float, new: State, reason: str, *, failsafe: bool = False) -> State:
+    def _go(self, t: float, new: State, reason: str, *, failsafe: bool = False,
+            nominal: bool = False) -> State:
         """Change state; a failsafe (and every state that takes the plan away) is logged
-        as a warning."""
+        as a warning. ``nominal``: a step of every normal flight (:class:`Transition`)."""
         old = self.state
-        self.transitions.append(Transition(t, old, new, reason, failsafe))
+        self.transitions.append(Transition(t, old, new, reason, failsafe, nominal))
         self.state = new
         self._t_state = t
         level = "warning" if failsafe or new in (State.HOLD, State.HANDBACK, State.PILOT,
@@ -390,7 +398,7 @@ class Supervisor:
             failures.append(f"battery {obs.battery_v:.2f} V < {lim.battery_land_v:.2f} V")
         self.preflight_failures = failures
         if not failures:
-            return self._go(obs.t, State.TAKEOFF, "preflight checks passed")
+            return self._go(obs.t, State.TAKEOFF, "preflight checks passed", nominal=True)
         if obs.t - self._t_state > lim.preflight_timeout_s:
             return self._go(obs.t, State.ABORTED, "preflight failed: " + "; ".join(failures))
         return self.state
@@ -400,7 +408,7 @@ class Supervisor:
         if failsafe is not None:
             return self._go(obs.t, *failsafe, failsafe=True)
         if obs.takeoff_done:
-            return self._go(obs.t, State.TRACK, "take-off height reached")
+            return self._go(obs.t, State.TRACK, "take-off height reached", nominal=True)
         timeout = self.limits.takeoff_timeout_s
         if obs.t - self._t_state > timeout:
             x, y, z = obs.position
@@ -414,7 +422,7 @@ class Supervisor:
         if failsafe is not None:
             return self._go(obs.t, *failsafe, failsafe=True)
         if obs.trajectory_done:
-            return self._go(obs.t, State.LAND, "trajectory complete")
+            return self._go(obs.t, State.LAND, "trajectory complete", nominal=True)
         return self.state
 
     def _hold(self, obs: Observation) -> State:
@@ -441,16 +449,17 @@ class Supervisor:
                 self._landed_since = obs.t
             elif obs.t - self._landed_since >= self.limits.landed_time_s:
                 if obs.height_above_ground_m < self.limits.landed_height_m:
-                    return self._go(obs.t, State.DISARM, "on the floor")
+                    return self._go(obs.t, State.DISARM, "on the floor", nominal=True)
                 return self._go(obs.t, State.DISARM, "on the floor: ground contact felt at "
-                                f"estimated height {obs.height_above_ground_m:.2f} m")
+                                f"estimated height {obs.height_above_ground_m:.2f} m", nominal=True)
         else:
             self._landed_since = None
         return self.state
 
     def _disarm(self, obs: Observation) -> State:
         if obs.t - self._t_state >= self.limits.disarm_time_s:
-            return self._go(obs.t, State.DONE, "landed and disarmed: vehicle handed back")
+            return self._go(obs.t, State.DONE, "landed and disarmed: vehicle handed back",
+                            nominal=True)
         return self.state
 
 

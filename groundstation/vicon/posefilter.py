@@ -64,7 +64,7 @@ class FilterOptions(TypedDict, total=False):
     """The optional :class:`PoseFilter` parameters, for callers that pass them through."""
 
     restart_silence_s: float
-    restart_backward_frames: int
+    restart_backjump_frames: int
     max_speed: float
     max_rotation_rate: float
     position_slack: float
@@ -86,7 +86,7 @@ def filter_options(config: ViconConfig, safety: SafetyConfig) -> FilterOptions:
     """
     return FilterOptions(
         restart_silence_s=config.restart_silence_s,
-        restart_backward_frames=config.restart_backjump_frames,
+        restart_backjump_frames=config.restart_backjump_frames,
         max_speed=config.max_speed_m_s,
         max_rotation_rate=config.max_rotation_rate_rad_s,
         reanchor_poses=config.reanchor_poses,
@@ -105,7 +105,7 @@ class PoseFilter:
     world_to_ned, body_to_object : (3, 3) rotations C_wn and C_bo (see :mod:`.frames`)
     latency_s : Vicon + network latency subtracted from the receive time [s]
     restart_silence_s : a silence longer than this makes any frame number acceptable [s]
-    restart_backward_frames : a backward jump larger than this is a Tracker restart
+    restart_backjump_frames : a backward jump larger than this is a Tracker restart
     max_speed : plausibility limit on the implied speed [m/s]
     max_rotation_rate : plausibility limit on the implied rotation rate [rad/s]
     position_slack : position jump always allowed [m]
@@ -126,7 +126,7 @@ class PoseFilter:
         body_to_object: npt.ArrayLike = DEFAULT_BODY_TO_OBJECT,
         latency_s: float = 0.005,
         restart_silence_s: float = 1.0,
-        restart_backward_frames: int = 1000,
+        restart_backjump_frames: int = 1000,
         max_speed: float = 5.0,
         max_rotation_rate: float = 30.0,
         position_slack: float = 0.02,
@@ -143,7 +143,7 @@ class PoseFilter:
         nonnegative = {
             "latency_s": latency_s,
             "restart_silence_s": restart_silence_s,
-            "restart_backward_frames": restart_backward_frames,
+            "restart_backjump_frames": restart_backjump_frames,
             "max_speed": max_speed,
             "max_rotation_rate": max_rotation_rate,
             "position_slack": position_slack,
@@ -166,7 +166,7 @@ class PoseFilter:
         self.plausibility = Plausibility.create(plausible_volume)
         self.latency_s = latency_s
         self.restart_silence_s = restart_silence_s
-        self.restart_backward_frames = restart_backward_frames
+        self.restart_backjump_frames = restart_backjump_frames
         self.max_speed = max_speed
         self.max_rotation_rate = max_rotation_rate
         self.position_slack = position_slack
@@ -184,7 +184,7 @@ class PoseFilter:
         self.streams = Streams(
             Gate(max_speed, max_rotation_rate, position_slack, angle_slack),
             confirm=reanchor_poses, gap_s=reanchor_after_s, silence_s=restart_silence_s,
-            backward_frames=restart_backward_frames, max_rate_hz=max_rate_hz,
+            backward_frames=restart_backjump_frames, max_rate_hz=max_rate_hz,
         )
         self.lost_missing = self.lost_zero = self.lost_held_identity = self.non_finite = 0
         self.implausible_position = self.implausible_rotation = self.poses = 0

@@ -1,12 +1,12 @@
 """``gs eval``: fly the whole suite, score every flight, write the report.
 
-:func:`run_eval` flies each :data:`~groundstation.evaluation.scenarios.SUITE`
+:func:`run_eval` flies each :data:`~sim_device.evaluation.scenarios.SUITE`
 scenario (in-process with ``fast``, else in real time over pty and UDP),
 computes its metrics, and writes ``report.md`` (the metrics table and the
 figures), ``metrics.json`` and the PNGs into ``out_dir``.
 
 With ``perturb`` seeds (``gs eval --perturb 1-5``) every scenario flies once on each
-seed's plant (:func:`~groundstation.evaluation.perturb.perturbation`); a scenario's
+seed's plant (:func:`~sim_device.evaluation.perturb.perturbation`); a scenario's
 metrics are then the worst case over the seeds
 (:func:`~groundstation.evaluation.scoring.worst_case`), each naming its seed, and
 its record (for the figures) is that of its worst flight: one that did not complete,
@@ -26,12 +26,13 @@ from typing import Any
 
 from groundstation.config import GroundStationConfig, apply_overrides
 from groundstation.control.simulate import SimResult
-from groundstation.evaluation.figures import all_figures
-from groundstation.evaluation.perturb import perturbation
 from groundstation.evaluation.record import FlightRecord
 from groundstation.evaluation.report import transitions_json, write_json
-from groundstation.evaluation.runner import run_in_process, run_real_time, simulate_model
-from groundstation.evaluation.scenarios import (
+from groundstation.evaluation.scoring import StepSpec, flight_metrics, worst_case
+from sim_device.evaluation.figures import all_figures
+from sim_device.evaluation.perturb import perturbation
+from sim_device.evaluation.runner import run_in_process, run_real_time, simulate_model
+from sim_device.evaluation.scenarios import (
     Scenario,
     corners_of,
     lap_period,
@@ -40,9 +41,8 @@ from groundstation.evaluation.scenarios import (
     select,
     step_of,
 )
-from groundstation.evaluation.scoring import StepSpec, flight_metrics, worst_case
-from groundstation.evaluation.summary import eval_json, eval_markdown
-from groundstation.evaluation.targets import TargetResult, check_targets
+from sim_device.evaluation.summary import eval_json, eval_markdown
+from sim_device.evaluation.targets import TargetResult, check_targets
 
 Progress = Callable[[str], None]
 

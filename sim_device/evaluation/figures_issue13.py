@@ -1,6 +1,6 @@
 """Issue 13's figures: figure-eight, yaw turn, the square at two headings, take-off at 135.
 
-Same conventions as :mod:`groundstation.evaluation.figures`: ground truth solid,
+Same conventions as :mod:`sim_device.evaluation.figures`: ground truth solid,
 references dotted black, top views NED from above (x north up, y east right), times
 since tracking started. Under ``gs eval --perturb`` each record is its scenario's worst
 flight and the titles name its seed. Errors are drawn on their own axes in cm: at the
@@ -23,8 +23,8 @@ from groundstation.evaluation.metrics import (
 )
 from groundstation.evaluation.plotting import REF_STYLE, TRUTH_STYLE, pyplot, save, since, top_view
 from groundstation.evaluation.record import FlightRecord
-from groundstation.evaluation.scenarios import EIGHT
 from groundstation.loop.supervisor import AIRBORNE, State
+from sim_device.evaluation.scenarios import EIGHT
 
 Records = Mapping[str, FlightRecord]
 LAP_S = float(EIGHT["trajectory.period_s"])

@@ -2,7 +2,7 @@
 
 A :class:`Scenario` names a trajectory, a controller, the Vicon rate, how long the
 trajectory is flown and the configuration overrides that inject faults. The
-runners (:mod:`groundstation.evaluation.runner`) turn one into a flight, in-process
+runners (:mod:`sim_device.evaluation.runner`) turn one into a flight, in-process
 on the simulated clock or in real time over the pty and UDP; both fly the same
 :class:`~groundstation.loop.core.FlightCore` with the same configuration.
 

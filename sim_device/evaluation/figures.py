@@ -1,8 +1,8 @@
 """The suite's figures, mirroring thesis Ch. 11 (Fig. 11.1-11.8) plus the fault scenarios
-(issue 13's flights: :mod:`groundstation.evaluation.figures_issue13`).
+(issue 13's flights: :mod:`sim_device.evaluation.figures_issue13`).
 
 Each function takes the flights by scenario name (see
-:mod:`groundstation.evaluation.scenarios`) and writes one PNG; a figure whose
+:mod:`sim_device.evaluation.scenarios`) and writes one PNG; a figure whose
 flights are missing (a partial run) is skipped. Positions are ground truth
 (solid), estimates dashed, references dotted black. Top views are NED from
 above: x north up, y east right. Times are seconds since tracking started.
@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 
 from groundstation.control.simulate import SimResult
-from groundstation.evaluation.figures_issue13 import issue13_figures
 from groundstation.evaluation.metrics import (
     error_norms,
     heading_deg,
@@ -35,8 +34,9 @@ from groundstation.evaluation.plotting import (
     top_view,
 )
 from groundstation.evaluation.record import FlightRecord
-from groundstation.evaluation.scenarios import STEP_TIME_S
 from groundstation.loop.supervisor import AIRBORNE, State
+from sim_device.evaluation.figures_issue13 import issue13_figures
+from sim_device.evaluation.scenarios import STEP_TIME_S
 
 Records = Mapping[str, FlightRecord]
 RATES = ("hover-1hz", "hover-10hz", "hover-100hz")

@@ -14,7 +14,6 @@ from typing import TYPE_CHECKING, Any
 
 from groundstation import __version__
 from groundstation.config import GroundStationConfig
-from groundstation.evaluation.perturb import PLANT_COLUMNS, RANGES, plant_row
 from groundstation.evaluation.record import TIMING_FAST, TIMING_REAL_TIME
 from groundstation.evaluation.report import (
     DEFINITIONS,
@@ -22,11 +21,13 @@ from groundstation.evaluation.report import (
     states_line,
     transitions_json,
 )
-from groundstation.evaluation.scenarios import STEP_TIME_S
-from groundstation.evaluation.targets import TargetResult, display
+from sim_device.config import sim_section
+from sim_device.evaluation.perturb import PLANT_COLUMNS, RANGES, plant_row
+from sim_device.evaluation.scenarios import STEP_TIME_S
+from sim_device.evaluation.targets import TargetResult, display
 
 if TYPE_CHECKING:
-    from groundstation.evaluation.suite import EvalReport, ScenarioOutcome
+    from sim_device.evaluation.suite import EvalReport, ScenarioOutcome
 
 TIMING_KEYS = ("compute_", "jitter_", "latency_")
 """Metrics that measure the code, not the plant: no seed is named for them."""
@@ -61,7 +62,7 @@ def eval_json(report: EvalReport, config: GroundStationConfig) -> dict[str, Any]
     return {"format": "groundstation evaluation", "version": __version__,
             "mode": "fast" if report.fast else "real-time",
             "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-            "seed": config.sim.seed if config.sim is not None else None,
+            "seed": sim_section(config).seed if config.sim is not None else None,
             "timing": TIMING_FAST if report.fast else TIMING_REAL_TIME,
             "wall_s": report.wall_s, "step_time_s": STEP_TIME_S,
             "perturbation": perturbation, "targets": targets,
@@ -71,7 +72,7 @@ def eval_json(report: EvalReport, config: GroundStationConfig) -> dict[str, Any]
 def _plant_section(plants: Mapping[int, Mapping[str, Any]]) -> list[str]:
     lines = ["## Perturbed plants", "",
              "Each seed draws the virtual lab's vehicle uniformly and independently within "
-             "(groundstation/evaluation/perturb.py):", ""]
+             "(sim_device/evaluation/perturb.py):", ""]
     lines += [f"- {what}: {how}" for what, how in RANGES.items()]
     lines += ["", "Scenario overrides take precedence (the thrust-error flights keep their "
               "10 %, the H-infinity rate-gain flights their 30 %), and the H-infinity hovers "
@@ -113,7 +114,7 @@ def eval_markdown(report: EvalReport, config: GroundStationConfig,
         seed_rows.append({k: v for k, v in o.seed_of.items() if not k.startswith(TIMING_KEYS)})
     table = metrics_table(["scenario", "controller", "Vicon [Hz]", "end"], rows,
                           real_time=not report.fast, seed_of=seed_rows if perturbed else None)
-    seed = config.sim.seed if config.sim is not None else "-"
+    seed = sim_section(config).seed if config.sim is not None else "-"
     plant = (f"perturbed, seeds {', '.join(map(str, report.plants))} (`--perturb`): every "
              "figure is the worst case over the seeds, the seed that gave it in parentheses "
              "(s3 = seed 3); a flight that did not complete counts as failed"

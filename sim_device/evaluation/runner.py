@@ -1,7 +1,7 @@
 """Fly one scenario: in-process on the simulated clock, or in real time over pty and UDP.
 
 Both runners build the same :class:`~groundstation.loop.core.FlightCore` from
-:func:`~groundstation.evaluation.scenarios.scenario_config` (trajectory,
+:func:`~sim_device.evaluation.scenarios.scenario_config` (trajectory,
 controller, duration) and return a :class:`FlightRecord`:
 
 * :func:`run_in_process` flies :class:`~groundstation.loop.inprocess.InProcessFlight`
@@ -19,15 +19,10 @@ the "simulation" curve of thesis Fig. 11.4.
 
 from __future__ import annotations
 
-import re
-import select
-import signal
 import socket
-import subprocess
-import sys
 import time
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -36,23 +31,25 @@ from groundstation.config import GroundStationConfig, apply_overrides, dump_conf
 from groundstation.control.simulate import SimPlant, SimResult, simulate
 from groundstation.errors import GroundStationError
 from groundstation.evaluation.record import FlightRecord, record_from_log, record_from_trace
-from groundstation.evaluation.scenarios import (
-    Scenario,
-    scenario_config,
-    scenario_trajectory,
-)
 from groundstation.loop.assemble import controller_from_config
 from groundstation.loop.core import FlightCore, TickResult
 from groundstation.loop.daemon import FlightDaemon
 from groundstation.loop.inprocess import InProcessFlight
 from groundstation.loop.inputs import InputHealth, VehicleStatus, quadrotor_params
 from groundstation.types import ImuSample, Pose
+from sim_device.config import sim_section
+from sim_device.evaluation.scenarios import (
+    Scenario,
+    scenario_config,
+    scenario_trajectory,
+)
+from sim_device.realtime import SimDeviceProcess
 
 MARGIN_S = 60.0
 """Simulated time allowed beyond the trajectory for preflight, take-off and landing [s]."""
 
 SIM_START_TIMEOUT_S = 20.0
-"""How long the virtual lab's child process may take to print its pty path [s]."""
+"""How long the virtual lab's child process may take to announce itself, or to stop [s]."""
 
 
 class _TickProbe:
@@ -98,40 +95,6 @@ def free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
-@contextmanager
-def _sim_device(config_file: Path, log_file: Path, limit_s: float) -> Iterator[str]:
-    """Run ``gs sim-device`` in a child process; yield its pty path; stop it (SIGINT, which
-    writes the truth file) on the way out.
-
-    The child runs in its own session, so a Ctrl-C at the terminal reaches only the
-    daemon (which then lands) and not the lab it is flying in; ``limit_s`` [s] bounds
-    the child's run should this process die without stopping it.
-    """
-    cmd = [sys.executable, "-c", "from groundstation.cli import app; app()",
-           "sim-device", "--config", str(config_file), "--duration", f"{limit_s:g}"]
-    with log_file.open("w") as err:
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True,
-                                start_new_session=True)
-    try:
-        assert proc.stdout is not None
-        ready, _, _ = select.select([proc.stdout], [], [], SIM_START_TIMEOUT_S)
-        line = proc.stdout.readline() if ready else ""
-        match = re.search(r" on (\S+) \(", line)
-        if match is None:
-            raise GroundStationError(f"the virtual lab did not start ({line.strip()!r}; "
-                                     f"see {log_file})")
-        yield match.group(1)
-    finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(10.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        if proc.stdout is not None:
-            proc.stdout.close()
-
-
 def build_daemon(scenario: Scenario, cfg: GroundStationConfig) -> FlightDaemon:
     """A daemon flying the scenario's controller (from ``cfg``) and trajectory."""
     return FlightDaemon(cfg, trajectory=scenario_trajectory(scenario, cfg),
@@ -152,8 +115,14 @@ def run_real_time(scenario: Scenario, base: GroundStationConfig, workdir: Path) 
     config_file = d / "config.yaml"
     config_file.write_text(dump_config(cfg), encoding="utf-8")
     limit = scenario.duration_s + 3 * MARGIN_S
-    with _sim_device(config_file, d / "sim-device.log", limit) as pty_path:
-        cfg = apply_overrides(cfg, {"serial.port": pty_path})
+    with ExitStack() as stack:
+        try:
+            lab = stack.enter_context(SimDeviceProcess(
+                config_file, truth, duration=limit, stderr=d / "sim-device.log",
+                timeout=SIM_START_TIMEOUT_S))
+        except RuntimeError as exc:
+            raise GroundStationError(f"the virtual lab did not start: {exc}") from exc
+        cfg = apply_overrides(cfg, {"serial.port": lab.pty_path})
         summary = build_daemon(scenario, cfg).run()
         time.sleep(0.2)  # the lab records the final COMMAND (mask 0) before it stops
     return record_from_log(summary.log_dir, truth)
@@ -164,9 +133,8 @@ def simulate_model(scenario: Scenario, base: GroundStationConfig) -> SimResult:
     (:func:`groundstation.control.simulate.simulate`) with the lab's rate-loop lag,
     command delay and thrust error; starts on the trajectory, lasts ``duration_s``."""
     cfg = scenario_config(scenario, base)
-    assert cfg.sim is not None  # scenario_config checked it
     controller = controller_from_config(cfg)
-    sim, vehicle = cfg.sim, cfg.vehicle
+    sim, vehicle = sim_section(cfg), cfg.vehicle
     plant = SimPlant(
         rate_tau=vehicle.rate_loop_tau_s if sim.rate_loop_tau_s is None else sim.rate_loop_tau_s,
         delay_s=vehicle.command_delay_s if sim.command_delay_s is None else sim.command_delay_s,
