@@ -20,16 +20,28 @@ import numpy as np
 import numpy.typing as npt
 
 from groundstation.errors import ConfigError
+from sim_device.config import SimConfig
 
 if TYPE_CHECKING:
     from groundstation.config import GroundStationConfig
-    from sim_device.config import SimConfig
 
 Vec3 = tuple[float, float, float]
 LossEncoding = Literal["missing", "zero", "held-identity"]
 LOSS_ENCODINGS: tuple[LossEncoding, ...] = ("missing", "zero", "held-identity")
 
 _EQ37: tuple[float, ...] = (2.073e-10, -1.143e-6, -1.054e-3, -0.903)
+
+
+_SIM = SimConfig()
+"""The ``sim:`` section's defaults (:mod:`sim_device.config`): the one place the lab's
+defaults are declared; the dataclasses below take theirs from it."""
+
+
+def _tuple3(values: list[float]) -> tuple[float, float, float]:
+    return (float(values[0]), float(values[1]), float(values[2]))
+
+
+_GYRO_BIAS, _ACC_BIAS = _tuple3(_SIM.gyro_bias), _tuple3(_SIM.acc_bias)
 
 
 def _require(ok: bool, name: str, value: object, reason: str) -> None:
@@ -71,10 +83,10 @@ class PlantParams:
     thrust_poly: tuple[float, ...] = _EQ37
     inflow: float = -0.423
     rate_tau: float = 0.064
-    motor_tau_s: float = 0.02
-    thrust_scale: float = 1.0
-    battery_droop: float = 0.03
-    battery_droop_time: float = 300.0
+    motor_tau_s: float = _SIM.motor_tau_s
+    thrust_scale: float = _SIM.thrust_scale
+    battery_droop: float = _SIM.battery_droop
+    battery_droop_time: float = _SIM.battery_droop_time_s
     initial_position: Vec3 = (0.0, 0.0, 0.0)
     initial_yaw: float = 0.0
     impact_time: float = 0.05
@@ -118,9 +130,9 @@ class ImuParams:
     acc_zero: Vec3 = (2048.0, 2048.0, 2048.0)
     gyro_variance: Vec3 = (1.24e-4, 1.94e-4, 8.54e-4)
     acc_variance: Vec3 = (4.60e-3, 2.62e-3, 3.54e-3)
-    gyro_bias: Vec3 = (0.01, -0.02, 0.005)
-    acc_bias: Vec3 = (0.05, -0.05, 0.1)
-    scale_error: float = 0.02
+    gyro_bias: Vec3 = _GYRO_BIAS
+    acc_bias: Vec3 = _ACC_BIAS
+    scale_error: float = _SIM.scale_error
     acc_saturation: float = 14.0
     gyro_saturation: float | None = None
     pressure_noise: float = 2.0
@@ -152,7 +164,7 @@ class LinkParams:
     crc_profile: str = "asctec"
     command_delay: float = 0.02
     watchdog: float = 0.100
-    battery_mv: int = 11800
+    battery_mv: int = _SIM.battery_mv
 
     def __post_init__(self) -> None:
         _require(self.baud > 0, "link.baud", self.baud, "must be > 0")
@@ -205,19 +217,19 @@ class ViconSimParams:
     first_frame : Tracker frame number of the first datagram
     """
 
-    rate_hz: float = 100.0
-    latency: float = 0.005
-    noise: bool = True
+    rate_hz: float = _SIM.vicon.rate_hz
+    latency: float = _SIM.vicon.latency_s
+    noise: bool = _SIM.vicon.noise
     position_variance: Vec3 = (4.16e-7, 3.28e-9, 2.91e-7)
     quaternion_variance: tuple[float, float, float, float] = (1.09e-9, 5.17e-6, 9.74e-6, 3.62e-6)
-    loss_encoding: LossEncoding = "held-identity"
+    loss_encoding: LossEncoding = _SIM.vicon.loss_encoding
     outages: tuple[tuple[float, float], ...] = ()
-    tilt_limit_deg: float = 60.0
-    volume_x: tuple[float, float] = (-1.5, 1.5)
-    volume_y: tuple[float, float] = (-1.5, 1.5)
-    volume_z: tuple[float, float] = (-2.0, 0.05)
+    tilt_limit_deg: float = _SIM.vicon.tilt_limit_deg
+    volume_x: tuple[float, float] = _SIM.vicon.volume_x
+    volume_y: tuple[float, float] = _SIM.vicon.volume_y
+    volume_z: tuple[float, float] = _SIM.vicon.volume_z
     object_name: str = "X3D"
-    pad_to: int | None = 1024
+    pad_to: int | None = _SIM.vicon.pad_to
     world_to_ned: tuple[Vec3, Vec3, Vec3] = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
     body_to_object: tuple[Vec3, Vec3, Vec3] = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
     first_frame: int = 1
@@ -246,10 +258,10 @@ class PilotParams:
         that moment, rate sticks neutral, instead of jumping to ``thrust``
     """
 
-    thrust: int = 0
-    serial_enable: bool = True
-    rc_link: bool = True
-    hold_thrust: bool = True
+    thrust: int = _SIM.pilot_thrust
+    serial_enable: bool = _SIM.serial_enable
+    rc_link: bool = _SIM.rc_link
+    hold_thrust: bool = _SIM.pilot_holds_thrust
 
     def __post_init__(self) -> None:
         _require(0 <= self.thrust <= 4096, "pilot.thrust", self.thrust, "in 0..4096")
@@ -264,8 +276,8 @@ class LabParams:
     truth_period : ground-truth log interval [s] (a multiple of dt is exact)
     """
 
-    dt: float = 0.002
-    seed: int = 1
+    dt: float = _SIM.dt_s
+    seed: int = _SIM.seed
     truth_period: float = 0.01
     plant: PlantParams = field(default_factory=PlantParams)
     imu: ImuParams = field(default_factory=ImuParams)
