@@ -15,12 +15,14 @@ import numpy as np
 
 from groundstation.asctec.messages import CommandMsg
 from groundstation.loop.recorder import FlightRecorder
+from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
 
 
 def main(ticks: int = 20_000) -> None:
     """Append ``ticks`` rows at a simulated 100 Hz and print per-tick costs in microseconds."""
-    imu = ImuSample(0.0, np.array([0.01, -0.02, 0.0]), np.array([0.0, 0.0, -9.82]), 1)
+    imu = ImuSample(0.0, np.array([0.01, -0.02, 0.0]),
+                    np.array([0.0, 0.0, -QuadrotorParams().g]), 1)
     pose = Pose(0.0, np.array([0.0, 0.0, -1.0]), np.array([1.0, 0.0, 0.0, 0.0]), 1)
     est = StateEstimate(0.0, np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3),
                         np.zeros(3), np.zeros(3), np.zeros(3), np.full(16, 1e-4))

@@ -18,6 +18,7 @@ import typer
 from groundstation import __version__
 from groundstation.config import (
     GroundStationConfig,
+    VehicleConfig,
     apply_overrides,
     check_files,
     dump_config,
@@ -271,7 +272,8 @@ def channels(
 @identify_app.command("thrust")
 def identify_thrust(
     csv: Annotated[Path, typer.Argument(help="CSV of thrust-stand measurements.")],
-    gravity: Annotated[float, typer.Option(help="g used to turn mass into force.")] = 9.82,
+    gravity: Annotated[float, typer.Option(help="g used to turn mass into force.")]
+        = VehicleConfig().gravity,
 ) -> None:
     """Fit the thrust polynomial F_lift(u_thrust) (eq. 3.7) to measurements (App. C.1).
 

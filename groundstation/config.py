@@ -46,6 +46,22 @@ from pydantic import (
 from pydantic_core import CoreSchema
 
 from groundstation.errors import ConfigError
+from groundstation.estimation.records import EkfParams
+from groundstation.model.quadrotor import QuadrotorParams
+from groundstation.model.sensors import (
+    ACC_SATURATION_M_S2,
+    ACC_VARIANCE_TABLE_6_3,
+    GYRO_VARIANCE_TABLE_6_3,
+    K_ACC_TABLE_6_2,
+    K_GYRO_TABLE_6_2,
+    VICON_POSITION_VARIANCE_TABLE_6_1,
+    VICON_QUATERNION_VARIANCE_TABLE_6_1,
+)
+from groundstation.model.thrust import THRUST_POLY_EQ37
+
+_QUAD = QuadrotorParams()
+"""The vehicle model's defaults (groundstation.model.quadrotor): mass, g, rate gains,
+induced inflow, rate-loop time constant; the vehicle section below takes them from it."""
 
 CHANNELS = ("pitch", "roll", "yaw", "thrust")
 """Channel names, in the spec's ctrl-mask bit order (bit0 pitch ... bit3 thrust)."""
@@ -253,36 +269,36 @@ class ViconConfig(ConfigModel):
 class VehicleConfig(ConfigModel):
     """The X-3D model parameters (thesis Ch. 3 and 6)."""
 
-    mass_kg: PositiveFloat = 0.60
+    mass_kg: PositiveFloat = _QUAD.mass
     # not printed in the thesis: 0.60 kg makes the eq. 3.7 polynomial hover near mid-stick
     # (F_lift(2000) = -5.93 N = -0.603 kg * 9.82), DESIGN.md errata
-    gravity: PositiveFloat = 9.82  # thesis eq. 3.8, Denmark
-    k_rate: Vec3 = Field(default_factory=lambda: [1.1e-3, 1.1e-3, 1.1e-3])
+    gravity: PositiveFloat = _QUAD.g  # thesis eq. 3.8, Denmark
+    k_rate: Vec3 = Field(default_factory=lambda: list(_QUAD.k_rate))
     # [K_phi, K_theta, K_psi] rad/s per stick unit: max roll step 2047 gave 2.25 rad/s
     # (Ch. 3.3.1), identified values not printed (DESIGN.md errata); yaw assumed the same
     thrust_poly: list[float] = Field(
-        default_factory=lambda: [2.073e-10, -1.143e-6, -1.054e-3, -0.903],
-        min_length=4, max_length=4,
+        default_factory=lambda: list(THRUST_POLY_EQ37), min_length=4, max_length=4,
     )  # eq. 3.7, [a3, a2, a1, a0], body-z force [N] (negative = up); App. C.1's a2 is a typo
-    induced_inflow: float = Field(-0.423, lt=0)  # I_i, eq. 3.9 and eq. C.8 [N s/m]
-    gyro_scale: Vec3 = Field(default_factory=lambda: [0.0144, 0.0143, 0.0127])
+    induced_inflow: float = Field(_QUAD.inflow, lt=0)  # I_i, eq. 3.9 and eq. C.8 [N s/m]
+    gyro_scale: Vec3 = Field(default_factory=lambda: list(K_GYRO_TABLE_6_2))
     # Table 6.2 K_gyro [rad/s per count]
-    acc_scale: Vec3 = Field(default_factory=lambda: [0.0086, 0.0077, 0.0111])
+    acc_scale: Vec3 = Field(default_factory=lambda: list(K_ACC_TABLE_6_2))
     # Table 6.2 K_acc [m/s^2 per count]
     gyro_zero: Vec3 = Field(default_factory=lambda: [2048.0, 2048.0, 2048.0])
     # spec section 3.3: 12-bit counts, zero at mid-range (calibrate per vehicle)
     acc_zero: Vec3 = Field(default_factory=lambda: [2048.0, 2048.0, 2048.0])  # as gyro_zero
-    gyro_variance: Vec3 = Field(default_factory=lambda: [1.24e-4, 1.94e-4, 8.54e-4])
+    gyro_variance: Vec3 = Field(default_factory=lambda: list(GYRO_VARIANCE_TABLE_6_3))
     # Table 6.3 [(rad/s)^2]
-    acc_variance: Vec3 = Field(default_factory=lambda: [4.60e-3, 2.62e-3, 3.54e-3])
+    acc_variance: Vec3 = Field(default_factory=lambda: list(ACC_VARIANCE_TABLE_6_3))
     # Table 6.3 [(m/s^2)^2]
-    vicon_position_variance: Vec3 = Field(default_factory=lambda: [4.16e-7, 3.28e-9, 2.91e-7])
+    vicon_position_variance: Vec3 = Field(
+        default_factory=lambda: list(VICON_POSITION_VARIANCE_TABLE_6_1))
     # Table 6.1 [m^2]
     vicon_quaternion_variance: list[float] = Field(
-        default_factory=lambda: [1.09e-9, 5.17e-6, 9.74e-6, 3.62e-6], min_length=4, max_length=4
-    )  # Table 6.1, q0..q3
-    acc_saturation: PositiveFloat = 14.0  # Ch. 6.2: accelerometer saturates near 14 m/s^2
-    rate_loop_tau_s: PositiveFloat = 0.064
+        default_factory=lambda: list(VICON_QUATERNION_VARIANCE_TABLE_6_1),
+        min_length=4, max_length=4)  # Table 6.1, q0..q3
+    acc_saturation: PositiveFloat = ACC_SATURATION_M_S2  # Ch. 6.2: accelerometer saturation
+    rate_loop_tau_s: PositiveFloat = _QUAD.rate_tau
     # on-board rate loop as a first-order lag: Fig. 3.8 rises (10-90 %) in 0.14 s = 2.2 tau.
     # The controller design, the virtual lab and the evaluation all use this one value
     command_delay_s: NonNegFloat = 0.02
@@ -333,7 +349,6 @@ class EstimatorConfig(ConfigModel):
     )  # 16 diagonal: P, q, v, gyro bias, acc bias; loose enough for biases to settle in ~3 s
     gate_probability: float = Field(0.9999, gt=0.5, lt=1.0)
     # chi-square innovation gate; 1e-4 false-reject rate per update
-    ignore_variance: PositiveFloat = 1e8  # Algorithms 1 and 2: R entry for ignored samples
     divergence_trace: PositiveFloat = 10.0
     # covariance trace above which the estimate is declared diverged (failsafe)
     max_vicon_delay_s: PositiveFloat = 0.2  # older poses are dropped instead of re-propagated
@@ -533,7 +548,8 @@ class SafetyConfig(ConfigModel):
     max_yaw_rate_deg_s: PositiveFloat = 90.0  # fastest heading change of a reference, tuned
     volume_margin_m: NonNegFloat = 0.1
     # a reference must stay this far inside volume_x/y/z (tracking error, braking room)
-    gravity_check_deg: PositiveFloat = 10.0  # accel gravity vs Vicon attitude agreement
+    gravity_check_deg: PositiveFloat = EkfParams().gravity_check_deg
+    # [deg] preflight: the accelerometer's gravity must agree with the Vicon attitude
     on_signal: Literal["land", "handback"] = "land"  # what SIGINT/SIGTERM does
     second_signal_after_s: float = Field(0.5, ge=0, le=10.0)
     # a second SIGINT/SIGTERM hands back at once only this long after the first [s];

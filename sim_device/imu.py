@@ -24,13 +24,14 @@ import math
 
 import numpy as np
 
+from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.model.sensors import AxisScaling
 from groundstation.types import FloatArray
 from sim_device.params import ImuParams
 
 SEA_LEVEL_PA = 101325.0
 """Pressure at the floor (z = 0) [Pa]."""
-PRESSURE_GRADIENT_PA_PER_M = 1.2 * 9.82
+PRESSURE_GRADIENT_PA_PER_M = 1.2 * QuadrotorParams().g
 """Air density 1.2 kg/m^3 times g: pressure rises this much per metre of NED z [Pa/m]."""
 
 _BLOCK = 512

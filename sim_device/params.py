@@ -20,6 +20,16 @@ import numpy as np
 import numpy.typing as npt
 
 from groundstation.errors import ConfigError
+from groundstation.model.quadrotor import QuadrotorParams
+from groundstation.model.sensors import (
+    ACC_SATURATION_M_S2,
+    ACC_VARIANCE_TABLE_6_3,
+    GYRO_VARIANCE_TABLE_6_3,
+    K_ACC_TABLE_6_2,
+    K_GYRO_TABLE_6_2,
+    VICON_POSITION_VARIANCE_TABLE_6_1,
+    VICON_QUATERNION_VARIANCE_TABLE_6_1,
+)
 from sim_device.config import SimConfig
 
 if TYPE_CHECKING:
@@ -29,7 +39,8 @@ Vec3 = tuple[float, float, float]
 LossEncoding = Literal["missing", "zero", "held-identity"]
 LOSS_ENCODINGS: tuple[LossEncoding, ...] = ("missing", "zero", "held-identity")
 
-_EQ37: tuple[float, ...] = (2.073e-10, -1.143e-6, -1.054e-3, -0.903)
+_VEHICLE = QuadrotorParams()
+"""The vehicle model's defaults (groundstation.model.quadrotor): the design model."""
 
 
 _SIM = SimConfig()
@@ -77,12 +88,12 @@ class PlantParams:
         and foam feet of a small quadrotor; thesis silent.
     """
 
-    mass: float = 0.60
-    g: float = 9.82
-    k_rate: Vec3 = (1.1e-3, 1.1e-3, 1.1e-3)
-    thrust_poly: tuple[float, ...] = _EQ37
-    inflow: float = -0.423
-    rate_tau: float = 0.064
+    mass: float = _VEHICLE.mass
+    g: float = _VEHICLE.g
+    k_rate: Vec3 = _VEHICLE.k_rate
+    thrust_poly: tuple[float, ...] = _VEHICLE.thrust_poly
+    inflow: float = _VEHICLE.inflow
+    rate_tau: float = _VEHICLE.rate_tau
     motor_tau_s: float = _SIM.motor_tau_s
     thrust_scale: float = _SIM.thrust_scale
     battery_droop: float = _SIM.battery_droop
@@ -124,16 +135,16 @@ class ImuParams:
     pressure_noise : standard deviation of the raw pressure reading [Pa]
     """
 
-    gyro_scale: Vec3 = (0.0144, 0.0143, 0.0127)
-    acc_scale: Vec3 = (0.0086, 0.0077, 0.0111)
+    gyro_scale: Vec3 = K_GYRO_TABLE_6_2
+    acc_scale: Vec3 = K_ACC_TABLE_6_2
     gyro_zero: Vec3 = (2048.0, 2048.0, 2048.0)
     acc_zero: Vec3 = (2048.0, 2048.0, 2048.0)
-    gyro_variance: Vec3 = (1.24e-4, 1.94e-4, 8.54e-4)
-    acc_variance: Vec3 = (4.60e-3, 2.62e-3, 3.54e-3)
+    gyro_variance: Vec3 = GYRO_VARIANCE_TABLE_6_3
+    acc_variance: Vec3 = ACC_VARIANCE_TABLE_6_3
     gyro_bias: Vec3 = _GYRO_BIAS
     acc_bias: Vec3 = _ACC_BIAS
     scale_error: float = _SIM.scale_error
-    acc_saturation: float = 14.0
+    acc_saturation: float = ACC_SATURATION_M_S2
     gyro_saturation: float | None = None
     pressure_noise: float = 2.0
 
@@ -220,8 +231,8 @@ class ViconSimParams:
     rate_hz: float = _SIM.vicon.rate_hz
     latency: float = _SIM.vicon.latency_s
     noise: bool = _SIM.vicon.noise
-    position_variance: Vec3 = (4.16e-7, 3.28e-9, 2.91e-7)
-    quaternion_variance: tuple[float, float, float, float] = (1.09e-9, 5.17e-6, 9.74e-6, 3.62e-6)
+    position_variance: Vec3 = VICON_POSITION_VARIANCE_TABLE_6_1
+    quaternion_variance: tuple[float, float, float, float] = VICON_QUATERNION_VARIANCE_TABLE_6_1
     loss_encoding: LossEncoding = _SIM.vicon.loss_encoding
     outages: tuple[tuple[float, float], ...] = ()
     tilt_limit_deg: float = _SIM.vicon.tilt_limit_deg

@@ -127,10 +127,10 @@ def test_file_level_refusals_are_one_line(tmp_path: Path) -> None:
 def test_what_yaml_writes_as_numbers_still_validates(tmp_path: Path) -> None:
     path = tmp_path / "gs.yaml"
     path.write_text("vicon:\n  latency_s: 5e-3\n  expected_rate_hz: 100\n"  # YAML 1.2 float, int
-                    "estimator:\n  ignore_variance: 1e8\n"
+                    "estimator:\n  divergence_trace: 1e1\n"
                     "safety:\n  volume_x: [-1.5, 1.5]\n")  # a list for a tuple
     cfg = load_config(path)
-    assert cfg.vicon.latency_s == 0.005 and cfg.estimator.ignore_variance == 1e8
+    assert cfg.vicon.latency_s == 0.005 and cfg.estimator.divergence_trace == 10.0
     assert cfg.vicon.expected_rate_hz == 100.0 and cfg.safety.volume_x == (-1.5, 1.5)
 
 

@@ -34,6 +34,9 @@ from groundstation.errors import TrajectoryError
 from groundstation.model import QuadrotorParams, ThrustMap
 from groundstation.types import FloatArray
 
+_VEHICLE = QuadrotorParams()
+"""The vehicle model's defaults (mass, g, inflow)."""
+
 
 @dataclass(frozen=True, slots=True)
 class LimitNames:
@@ -61,9 +64,9 @@ class FlightLimits:
     accepted (set-point steps, sharp corners); names : what refusals call them.
     """
 
-    mass_kg: float = 0.60
-    gravity: float = 9.82
-    induced_inflow: float = -0.423
+    mass_kg: float = _VEHICLE.mass
+    gravity: float = _VEHICLE.g
+    induced_inflow: float = _VEHICLE.inflow
     lift_min_n: float = 0.9
     lift_max_n: float = 12.0
     max_tilt_rad: float = math.radians(20.0)

@@ -32,12 +32,15 @@ from groundstation.model import QuadrotorModel, QuadrotorParams, inputs_from_sti
 from groundstation.model.quaternion import dcm_from_quat
 from groundstation.types import ControlOutput, FloatArray, StateEstimate
 
+_VEHICLE = QuadrotorParams()
+"""The vehicle model's defaults (the rate-loop time constant)."""
+
 
 @dataclass(frozen=True, slots=True)
 class SimPlant:
     """Plant options (see the module docstring); ``rate_tau = 0`` is an ideal rate loop."""
 
-    rate_tau: float = 0.064
+    rate_tau: float = _VEHICLE.rate_tau
     delay_s: float = 0.02
     thrust_scale: float = 1.0
     dt: float = 0.005

@@ -52,7 +52,7 @@ def initial_state(
     accs = np.array([s.acc for s in imu_samples], dtype=float)
     g_mean, a_mean = gyros.mean(axis=0), accs.mean(axis=0)
     stationary = bool(n >= 2 and np.all(gyros.std(axis=0) < params.stationary_gyro_std))
-    ok, angle, norm = gravity_check(a_mean, q, params.g, params.gravity_tolerance_deg)
+    ok, angle, norm = gravity_check(a_mean, q, params.g, params.gravity_check_deg)
     if params.init_biases_from_imu and stationary and ok:
         x[10:13] = g_mean
         x[13:16] = a_mean + gravity_body(q, params.g)  # measured - expected(-g_b)

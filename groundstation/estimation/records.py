@@ -14,10 +14,26 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from groundstation.model.quadrotor import QuadrotorParams
+from groundstation.model.sensors import (
+    ACC_VARIANCE_TABLE_6_3,
+    GYRO_VARIANCE_TABLE_6_3,
+    VICON_POSITION_VARIANCE_TABLE_6_1,
+    VICON_QUATERNION_VARIANCE_TABLE_6_1,
+)
 from groundstation.types import FloatArray
 
+_VEHICLE = QuadrotorParams()
+"""The vehicle model's defaults (g)."""
+
 if TYPE_CHECKING:  # pragma: no cover - import only for the type checker
-    from groundstation.config import EstimatorConfig, SafetyConfig, VehicleConfig, ViconConfig
+    from groundstation.config import (
+        EstimatorConfig,
+        SafetyConfig,
+        SerialConfig,
+        VehicleConfig,
+        ViconConfig,
+    )
 
 __all__ = ["EkfHealth", "EkfParams", "InitReport", "UpdateReason", "UpdateResult"]
 
@@ -97,18 +113,18 @@ class EkfParams:
     imu_repeat_on_identical : Algorithm 1 also for identical values with a new counter.
     init_biases_from_imu : estimate initial biases from stationary IMU samples.
     stationary_gyro_std : per-axis gyro std [rad/s] below which samples count as at rest.
-    gravity_tolerance_deg : largest angle between measured and Vicon-predicted gravity.
+    gravity_check_deg : largest angle between measured and Vicon-predicted gravity.
     """
 
-    g: float = 9.82
-    gyro_var: Vec3 = (1.24e-4, 1.94e-4, 8.54e-4)
-    acc_var: Vec3 = (4.60e-3, 2.62e-3, 3.54e-3)
+    g: float = _VEHICLE.g
+    gyro_var: Vec3 = GYRO_VARIANCE_TABLE_6_3
+    acc_var: Vec3 = ACC_VARIANCE_TABLE_6_3
     imu_period: float = 0.01
     gyro_bias_walk: float = 1e-6
     acc_bias_walk: float = 1e-4
     process_noise_scale: float = 1.0
-    vicon_position_var: Vec3 = (4.16e-7, 3.28e-9, 2.91e-7)
-    vicon_quaternion_var: tuple[float, float, float, float] = (1.09e-9, 5.17e-6, 9.74e-6, 3.62e-6)
+    vicon_position_var: Vec3 = VICON_POSITION_VARIANCE_TABLE_6_1
+    vicon_quaternion_var: tuple[float, float, float, float] = VICON_QUATERNION_VARIANCE_TABLE_6_1
     min_measurement_var: float = 1e-9
     initial_variance: tuple[float, ...] = field(default_factory=_default_p0)
     gate_probability: float = 0.9999
@@ -125,7 +141,7 @@ class EkfParams:
     imu_repeat_on_identical: bool = True
     init_biases_from_imu: bool = True
     stationary_gyro_std: float = 0.1
-    gravity_tolerance_deg: float = 10.0
+    gravity_check_deg: float = 10.0
 
     def __post_init__(self) -> None:
         """Validate once: shapes, positivity, probability range."""
@@ -136,7 +152,7 @@ class EkfParams:
         for name in ("g", "imu_period", "gyro_bias_walk", "acc_bias_walk", "process_noise_scale",
                      "min_measurement_var", "max_vicon_delay", "gate_reset_after",
                      "divergence_trace", "max_step", "stationary_gyro_std",
-                     "gravity_tolerance_deg", "reset_position_sigma", "reset_attitude_sigma",
+                     "gravity_check_deg", "reset_position_sigma", "reset_attitude_sigma",
                      "max_speed", "max_rotation_rate"):  # fmt: skip
             _check_positive(name, (getattr(self, name),), 1)
         box = self.plausible_volume
@@ -163,10 +179,13 @@ class EkfParams:
     @classmethod
     def from_config(cls, vehicle: VehicleConfig, estimator: EstimatorConfig,
                     vicon: ViconConfig | None = None,
-                    safety: SafetyConfig | None = None) -> EkfParams:
-        """Build from the ``vehicle`` and ``estimator`` configuration sections, and the
-        ``vicon`` and ``safety`` ones for the gate reset and the plausible volume (their
-        defaults without them).
+                    safety: SafetyConfig | None = None,
+                    serial: SerialConfig | None = None) -> EkfParams:
+        """Build from the ``vehicle`` and ``estimator`` configuration sections, the
+        ``vicon`` and ``safety`` ones for the gate reset, the plausible volume and the
+        gravity check (``safety.gravity_check_deg``), and the ``serial`` one for the IMU
+        period (``serial.data_period_ms``: the vehicle's IMU variances are per sample at
+        that period); the defaults without them.
 
         ``estimator.r_override`` (7x7 or diagonal 7 over ``[P, q0..q3]``) replaces
         Table 6.1; only its diagonal is used (``q0`` dropped, see above).
@@ -201,6 +220,10 @@ class EkfParams:
                              max_rotation_rate=vicon.max_rotation_rate_rad_s)
             if safety is not None:
                 params = replace(params, plausible_volume=vicon.plausible_volume(safety))
+        if safety is not None:
+            params = replace(params, gravity_check_deg=safety.gravity_check_deg)
+        if serial is not None:
+            params = replace(params, imu_period=serial.data_period_ms / 1000.0)
         return params
 
 

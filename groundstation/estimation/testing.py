@@ -37,7 +37,15 @@ from groundstation.model.quaternion import (
     quat_from_rotvec,
     rotvec_from_quat,
 )
+from groundstation.model.sensors import (
+    ACC_VARIANCE_TABLE_6_3,
+    GYRO_VARIANCE_TABLE_6_3,
+    VICON_POSITION_VARIANCE_TABLE_6_1,
+    VICON_QUATERNION_VARIANCE_TABLE_6_1,
+)
 from groundstation.types import FloatArray, ImuSample, Pose
+
+_Q_VAR_1_3 = VICON_QUATERNION_VARIANCE_TABLE_6_1[1:]
 
 __all__ = [
     "SensorNoise",
@@ -85,12 +93,12 @@ class SensorNoise:
     The biases start at ``gyro_bias``/``acc_bias`` and random-walk with the given densities.
     """
 
-    gyro_var: tuple[float, float, float] = (1.24e-4, 1.94e-4, 8.54e-4)
-    acc_var: tuple[float, float, float] = (4.60e-3, 2.62e-3, 3.54e-3)
+    gyro_var: tuple[float, float, float] = GYRO_VARIANCE_TABLE_6_3
+    acc_var: tuple[float, float, float] = ACC_VARIANCE_TABLE_6_3
     gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
     acc_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    position_var: tuple[float, float, float] = (4.16e-7, 3.28e-9, 2.91e-7)
-    quaternion_var: tuple[float, float, float] = (5.17e-6, 9.74e-6, 3.62e-6)  # q1..q3
+    position_var: tuple[float, float, float] = VICON_POSITION_VARIANCE_TABLE_6_1
+    quaternion_var: tuple[float, float, float] = _Q_VAR_1_3  # q1..q3
     random_sign: bool = True
     gyro_bias_walk: float = 0.0  # bias random-walk densities [(rad/s)^2/s], [(m/s^2)^2/s]
     acc_bias_walk: float = 0.0

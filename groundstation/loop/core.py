@@ -107,8 +107,8 @@ class FlightCore:
                  duration_s: float | None = None) -> None:
         self.config = config
         quad = quadrotor_params(config)
-        self.ekf = estimator or Ekf(EkfParams.from_config(config.vehicle, config.estimator,
-                                                          config.vicon, config.safety))
+        self.ekf = estimator or Ekf(EkfParams.from_config(
+            config.vehicle, config.estimator, config.vicon, config.safety, config.serial))
         self.controller = controller or controller_from_config(config)
         # built from the configuration unless given, shaped, and refused (TrajectoryError)
         # unless it is feasible and inside the volume

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from groundstation.errors import IdentificationError
+from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.model.thrust import THRUST_POLY_EQ37, ThrustMap
 from groundstation.types import FloatArray
 
@@ -159,10 +160,11 @@ def fit_induced_inflow(f_net: FloatArray, v3: FloatArray) -> InflowFit:
     return InflowFit(float(np.mean(per_row)), var, tuple(float(x) for x in per_row))
 
 
-def identify_thrust_csv(path: str | Path, g: float = 9.82) -> ThrustFit:
+def identify_thrust_csv(path: str | Path, g: float = QuadrotorParams().g) -> ThrustFit:
     """Fit the thrust polynomial to a CSV file (format in the module docstring).
 
-    g : gravity [m/s^2] to turn ``delta_m_kg`` into force (9.82, Ch. 3.4).
+    g : gravity [m/s^2] to turn ``delta_m_kg`` into force (default the vehicle model's,
+        Ch. 3.4).
     """
     cols = _read_csv(Path(path), [("u_thrust",), ("force_n", "delta_m_kg")])
     force = cols["force_n"] if "force_n" in cols else -g * cols["delta_m_kg"]

@@ -35,6 +35,23 @@ K_GYRO_TABLE_6_2: tuple[float, float, float] = (0.0144, 0.0143, 0.0127)
 K_ACC_TABLE_6_2: tuple[float, float, float] = (0.0086, 0.0077, 0.0111)
 """Accelerometer scale per axis [m/s^2 per count] (Table 6.2)."""
 
+GYRO_VARIANCE_TABLE_6_3: tuple[float, float, float] = (1.24e-4, 1.94e-4, 8.54e-4)
+"""Gyro white-noise variance per sample at 100 Hz, per axis [(rad/s)^2] (Table 6.3)."""
+
+ACC_VARIANCE_TABLE_6_3: tuple[float, float, float] = (4.60e-3, 2.62e-3, 3.54e-3)
+"""Accelerometer white-noise variance per sample at 100 Hz, per axis [(m/s^2)^2]
+(Table 6.3)."""
+
+VICON_POSITION_VARIANCE_TABLE_6_1: tuple[float, float, float] = (4.16e-7, 3.28e-9, 2.91e-7)
+"""Vicon position noise variance, x y z [m^2] (Table 6.1)."""
+
+VICON_QUATERNION_VARIANCE_TABLE_6_1: tuple[float, float, float, float] = (
+    1.09e-9, 5.17e-6, 9.74e-6, 3.62e-6)
+"""Vicon attitude noise variance of q0..q3 [-] (Table 6.1)."""
+
+ACC_SATURATION_M_S2 = 14.0
+"""The accelerometer saturates near this specific force [m/s^2] (Ch. 6.2)."""
+
 
 @dataclass(frozen=True, slots=True)
 class AxisScaling:
