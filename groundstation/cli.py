@@ -1,17 +1,21 @@
 """The `gs` command line.
 
 Each command is a thin shell: parse options, load the configuration, call the
-package, translate :class:`~groundstation.errors.GroundStationError` into a
-one-line message and a non-zero exit code. Exit codes: 0 success, 1 runtime
-failure, 2 bad configuration or usage; `gs fly` adds 3 (could not start) and 4
-(stopped on request), see its help.
+package. :func:`main` (the console entry point) is the one error boundary around
+all of them: a one-line ``error: ...`` and a documented exit code, never a
+traceback, for a user's mistake. Exit codes: 0 success; 1 runtime failure (also a
+missing optional package); 2 bad configuration, usage, or a file that cannot be
+used; `gs fly` adds 3 (could not start) and 4 (stopped on request), see its help;
+130 Ctrl-C; 141 the reader of the output went away (``gs export LOG | head``).
 """
 
 from __future__ import annotations
 
 import math
+import os
+import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, NoReturn
 
 import typer
 
@@ -153,14 +157,10 @@ def export(
     out: Annotated[Path | None, typer.Option(help="CSV file (default: stdout).")] = None,
 ) -> None:
     """Export a flight log as CSV (one column per value)."""
-    import sys
-
     from groundstation.loop.recorder import export_csv
 
-    try:
-        rows = export_csv(log, out if out is not None else sys.stdout)
-    except GroundStationError as exc:
-        raise _fail(str(exc), 1) from exc
+    # errors (and a reader that went away: exit 141) are main()'s to report
+    rows = export_csv(log, out if out is not None else sys.stdout)
     if out is not None:
         typer.echo(f"{rows} rows written to {out}", err=True)
 
@@ -345,13 +345,60 @@ def synth_hinf(
                f"written to {out}")
 
 
-def main() -> None:  # pragma: no cover - console entry point alternative
-    """Run the CLI, turning unexpected package errors into exit code 1."""
+OPTIONAL_EXTRAS = {"matplotlib": "plot", "cvxpy": "hinf"}
+"""Optional packages and the extra that installs each (pyproject.toml)."""
+
+EXIT_BROKEN_PIPE = 141
+"""Exit code when the reader of our output went away (``gs export LOG | head``): 128 +
+SIGPIPE, what a shell reports for a tool that SIGPIPE stopped."""
+
+EXIT_INTERRUPTED = 130
+"""Exit code on Ctrl-C outside a flight (128 + SIGINT); a flight lands instead (4)."""
+
+
+def main(argv: list[str] | None = None) -> None:
+    """The ``gs`` entry point and the CLI's one error boundary.
+
+    Every command runs inside it, so no user mistake ends in a traceback: a
+    :class:`~groundstation.errors.GroundStationError` prints ``error: ...`` and exits 2
+    (ConfigError) or 1; a file that cannot be used (missing, a directory, unreadable)
+    exits 2 naming it; a missing optional package exits 1 naming the extra to install;
+    a closed pipe exits :data:`EXIT_BROKEN_PIPE` quietly; Ctrl-C exits
+    :data:`EXIT_INTERRUPTED`. Usage errors are click's (exit 2 with the usage). Any other
+    exception is a bug and keeps its traceback.
+    """
     try:
-        app()
+        app(args=argv)
+    except BrokenPipeError:
+        _quiet_broken_pipe()
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        raise SystemExit(EXIT_INTERRUPTED) from None
     except GroundStationError as exc:
+        if isinstance(exc.__cause__, BrokenPipeError):  # e.g. export_csv's RecorderError
+            _quiet_broken_pipe()
         typer.echo(f"error: {exc}", err=True)
-        raise SystemExit(1) from exc
+        raise SystemExit(2 if isinstance(exc, ConfigError) else 1) from None
+    except ImportError as exc:
+        extra = OPTIONAL_EXTRAS.get((exc.name or "").partition(".")[0])
+        if extra is None:
+            raise
+        typer.echo(f"error: this needs the optional package {exc.name}: "
+                   f"pip install 'groundstation[{extra}]'", err=True)
+        raise SystemExit(1) from None
+    except OSError as exc:
+        if exc.filename is None:
+            raise
+        typer.echo(f"error: {exc.filename}: {exc.strerror or exc}", err=True)
+        raise SystemExit(2) from None
+
+
+def _quiet_broken_pipe() -> NoReturn:
+    """Exit :data:`EXIT_BROKEN_PIPE` without a word. Python docs, "Note on SIGPIPE":
+    stdout goes to devnull so the interpreter's final flush does not raise again."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    raise SystemExit(EXIT_BROKEN_PIPE)
 
 
 def _add_lab_commands() -> None:

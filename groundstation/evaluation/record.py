@@ -139,7 +139,14 @@ def load_truth(path: str | Path) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Read a virtual-lab truth file: monotonic times (N,) [s], positions (N, 3) NED [m],
     attitudes (N, 4). RecorderError if unreadable or without ``start_monotonic``."""
     try:
-        with np.load(Path(path), allow_pickle=False) as data:
+        loaded = np.load(Path(path), allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise RecorderError(f"{path}: not a readable truth file: {exc!r}") from exc
+    if not isinstance(loaded, np.lib.npyio.NpzFile):  # a .npy: one array, not a truth file
+        raise RecorderError(f"{path}: not a truth file (a single array; the virtual lab "
+                            "writes an .npz with t, position, quaternion, start_monotonic)")
+    try:
+        with loaded as data:
             arrays = {k: np.array(data[k], dtype=float) for k in ("t", "position", "quaternion")}
             start = float(data["start_monotonic"]) if "start_monotonic" in data.files else None
     except (OSError, ValueError, KeyError) as exc:

@@ -531,6 +531,8 @@ def read_flight(path: str | Path) -> tuple[npt.NDArray[np.void], dict[str, Any],
     if the files are missing, unreadable or of another schema version.
     """
     p = Path(path)
+    if not p.exists():
+        raise RecorderError(f"{p}: not a readable flight log: no such file or directory")
     directory = p if p.is_dir() else p.parent
     try:
         flat = np.load(directory / FLIGHT_FILE)

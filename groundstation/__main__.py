@@ -1,0 +1,5 @@
+"""``python -m groundstation``: the ``gs`` command (through its error boundary)."""
+
+from groundstation.cli import main
+
+main()
