@@ -58,6 +58,8 @@ sys.modules["sim_device"] = None  # import sim_device -> ImportError, as in the 
 import groundstation
 failed = []
 for info in pkgutil.walk_packages(groundstation.__path__, "groundstation."):
+    if info.name.endswith(".__main__"):
+        continue  # `python -m groundstation` runs the CLI on import
     try:
         importlib.import_module(info.name)
     except ImportError as exc:
