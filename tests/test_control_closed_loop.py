@@ -20,13 +20,11 @@ from groundstation.control import (
     LqrController,
     PidController,
     make_trajectory,
-    rms_error,
-    step_metrics,
-    time_lag,
 )
 from groundstation.control.hinf import HinfController, default_gain_path, load_hinf_gain
 from groundstation.control.lqr_ff import FeedforwardLqr
 from groundstation.control.simulate import SimPlant, SimResult, simulate
+from groundstation.evaluation.metrics import error_norms, rms, step_metrics, time_lag
 from groundstation.model.quaternion import quat_from_euler
 
 FACTORIES: dict[str, Callable[[], Controller]] = {
@@ -80,7 +78,7 @@ def square_runs() -> dict[str, SimResult]:
 
 def _second_lap(r: SimResult) -> tuple[float, float]:
     w = r.t >= 20.0
-    return (rms_error(r.position[w, :2], r.reference[w, :2]),
+    return (rms(error_norms(r.position[w, :2], r.reference[w, :2])),
             time_lag(r.position[w, :2], r.reference[w, :2], float(r.t[1] - r.t[0])))
 
 

@@ -21,10 +21,9 @@ from groundstation.control import (
     LqrController,
     PidController,
     make_trajectory,
-    rms_error,
-    time_lag,
 )
 from groundstation.control.hinf import HinfController, default_gain_path, load_hinf_gain
+from groundstation.evaluation.metrics import error_norms, rms, time_lag
 from groundstation.loop.inprocess import FlightResult, fly_in_process
 from groundstation.loop.inputs import quadrotor_params
 from groundstation.loop.supervisor import State
@@ -62,7 +61,7 @@ def square_10hz() -> dict[str, tuple[float, float]]:
         lap2 = t >= t[0] + 20.0
         pos = result.trace["true_pos"][track][lap2, :2]
         ref = result.trace["ref_pos"][track][lap2, :2]
-        out[name] = (rms_error(pos, ref), time_lag(pos, ref, float(np.median(np.diff(t)))))
+        out[name] = (rms(error_norms(pos, ref)), time_lag(pos, ref, float(np.median(np.diff(t)))))
     return out
 
 
@@ -118,7 +117,7 @@ def test_hinf_findings_in_the_virtual_lab() -> None:
     result = fly(cfg, lag, "hover", 15.0)
     assert result.final_state is State.DONE and result.success
     track = result.during(State.TRACK)
-    err = rms_error(result.trace["true_pos"][track], result.trace["ref_pos"][track])
+    err = rms(error_norms(result.trace["true_pos"][track], result.trace["ref_pos"][track]))
     assert err < 0.03  # reached 0.012 m
 
 
@@ -144,7 +143,7 @@ def test_a_waypoint_file_turning_the_heading_once_around_flies(tmp_path: Path,
     tilt = np.degrees(np.arccos(np.clip(q[:, 0] ** 2 - q[:, 1] ** 2 - q[:, 2] ** 2
                                         + q[:, 3] ** 2, -1.0, 1.0)))
     assert tilt.max() < 5.0  # reached 1.0 deg (lqr-ff), 0.3 deg (lqr-cv)
-    err = rms_error(result.trace["true_pos"][track], result.trace["ref_pos"][track])
+    err = rms(error_norms(result.trace["true_pos"][track], result.trace["ref_pos"][track]))
     assert err < 0.015, err  # the 1.5 cm; reached 0.38 cm (lqr-ff), 1.0 cm (lqr-cv)
     yaw = np.arctan2(2 * (q[:, 0] * q[:, 3] + q[:, 1] * q[:, 2]),
                      1 - 2 * (q[:, 2] ** 2 + q[:, 3] ** 2))

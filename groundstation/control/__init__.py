@@ -27,7 +27,6 @@ from groundstation.control.lqr_design import (
     dlqr,
     riccati_iteration,
 )
-from groundstation.control.metrics import StepMetrics, rms_error, step_metrics, time_lag
 from groundstation.control.pid import PidController
 from groundstation.control.shaping import MinJerkPath, TimeWarp, shape_for_flight
 from groundstation.control.sticks import (
@@ -66,7 +65,6 @@ __all__ = [
     "PidController",
     "PiecewiseLinear",
     "SaturationFlags",
-    "StepMetrics",
     "StickParams",
     "TimeWarp",
     "TrackingGains",
@@ -80,11 +78,8 @@ __all__ = [
     "load_waypoints",
     "make_trajectory",
     "riccati_iteration",
-    "rms_error",
     "shape_for_flight",
     "square",
-    "step_metrics",
-    "time_lag",
     "to_sticks",
     "trajectory_from_config",
     "yz_rectangle",
