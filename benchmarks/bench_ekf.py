@@ -2,17 +2,22 @@
 
 Run: ``.venv/bin/python benchmarks/bench_ekf.py``. Prints p50/p99/max in
 microseconds for predict+update, predict alone and update alone, over samples
-from the in-package truth simulator (hover, Table 6.1/6.3 noise). Target: p99 <= 100 us.
+from the tests' truth simulator (``tests/ekf_truth.py``; hover, Table 6.1/6.3 noise).
+Target: p99 <= 100 us.
 """
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from groundstation.estimation import Ekf
-from groundstation.estimation.testing import TruthSimulator, square_reference
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from ekf_truth import TruthSimulator, square_reference
 
 N = 5000
 

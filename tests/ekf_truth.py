@@ -1,5 +1,6 @@
-"""In-process truth simulator for estimator tests and tuning (a harness shipped in
-the package, like ``structlog.testing``; the full virtual lab lives in ``sim_device``).
+"""In-process truth simulator for the estimator's tests and ``benchmarks/bench_ekf.py``
+(test-only: not part of the package; the virtual lab, with the full plant, lives in
+``sim_device``).
 
 :class:`TruthSimulator` flies the nonlinear model of
 :class:`~groundstation.model.quadrotor.QuadrotorModel` along a trajectory with a

@@ -11,16 +11,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.stats import chi2
-
-from groundstation.estimation import Ekf, EkfParams
-from groundstation.estimation.testing import (
+from ekf_truth import (
     SensorNoise,
     TruthSimulator,
     fly,
     hover_reference,
     square_reference,
 )
+from scipy.stats import chi2
+
+from groundstation.estimation import Ekf, EkfParams
 
 BIASED = SensorNoise(gyro_bias=(0.02, -0.01, 0.03), acc_bias=(0.1, -0.2, 0.15))
 RAW_VICON_POS_RMS = float(np.sqrt(4.16e-7 + 3.28e-9 + 2.91e-7))  # Table 6.1: 0.84 mm

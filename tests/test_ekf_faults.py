@@ -6,17 +6,17 @@ import math
 
 import numpy as np
 import pytest
-
-from groundstation.errors import EstimatorError
-from groundstation.estimation import Ekf, EkfParams, Estimator, PoseHoldEstimator
-from groundstation.estimation.records import UpdateReason
-from groundstation.estimation.testing import (
+from ekf_truth import (
     SensorNoise,
     TruthSimulator,
     fly,
     hover_reference,
     square_reference,
 )
+
+from groundstation.errors import EstimatorError
+from groundstation.estimation import Ekf, EkfParams, Estimator, PoseHoldEstimator
+from groundstation.estimation.records import UpdateReason
 from groundstation.types import ImuSample, Pose
 
 BIASED = SensorNoise(gyro_bias=(0.02, -0.01, 0.03), acc_bias=(0.1, -0.2, 0.15))

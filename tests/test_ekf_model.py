@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from ekf_truth import SensorNoise, TruthSimulator, square_reference
 from scipy.linalg import expm
 
 from groundstation.config import EstimatorConfig, SafetyConfig, VehicleConfig, ViconConfig
@@ -18,7 +19,6 @@ from groundstation.estimation.imu_model import (
     jacobian_flat_index,
     propagate,
 )
-from groundstation.estimation.testing import SensorNoise, TruthSimulator, square_reference
 from groundstation.model.quaternion import normalize
 
 G = 9.82
