@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+from ekf_truth import SensorNoise, TruthSimulator, square_reference
 
 from groundstation.config import validate_config
-from groundstation.estimation import Ekf, EkfParams
-from groundstation.estimation.testing import SensorNoise, TruthSimulator, square_reference
+from groundstation.estimation import Ekf, EkfParams, Estimator, PoseHoldEstimator
 from groundstation.loop.core import INIT_IMU_SAMPLES, FlightCore
 from groundstation.types import ImuSample, Pose
 
@@ -54,3 +54,24 @@ def test_held_sample_fuses_every_pose_in_order_and_matches_replay() -> None:
     assert ref.health().late_poses > 350  # the old arrangement re-propagated nearly all
     assert core.ekf.health().late_poses == 0
     assert core.ekf.health().updates == ref.health().updates
+
+
+def test_the_core_flies_any_estimator_of_the_protocol() -> None:
+    """FlightCore is typed and run against the Estimator protocol, not the EKF: the
+    smallest estimator that satisfies it passes through initialisation, updates and the
+    per-tick failsafe figures; it checks no gravity, so the preflight would refuse."""
+    core = FlightCore(validate_config({}), estimator=PoseHoldEstimator())
+    assert isinstance(core.ekf, Estimator)
+    stream = _real_time_stream(INIT_IMU_SAMPLES + 30)
+    for imu, pose in stream[:INIT_IMU_SAMPLES]:
+        assert core.estimate_step(imu, [pose]) is None
+    assert core.init_report is not None and core.init_report.gravity_ok is None
+    for imu, pose in stream[INIT_IMU_SAMPLES:]:
+        est = core.estimate_step(imu, [pose])
+        assert est is not None and est.t == imu.t
+        np.testing.assert_array_equal(est.position, pose.position)
+        np.testing.assert_array_equal(est.omega, imu.gyro)
+    assert not core.ekf.diverged
+    # the filter runs one sample behind: at the previous sample, after the newest pose
+    assert core.ekf.time_since_fix == stream[-2][0].t - stream[-1][1].t
+    assert core.ekf.health().updates == 30

@@ -37,6 +37,7 @@ from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller, heading_of
 from groundstation.control.sticks import StickParams, to_sticks
 from groundstation.control.trajectory import Trajectory
+from groundstation.estimation.base import Estimator
 from groundstation.estimation.ekf import Ekf
 from groundstation.estimation.records import EkfParams, InitReport
 from groundstation.loop.assemble import controller_from_config, trajectory_for_flight
@@ -103,11 +104,11 @@ class FlightCore:
     """
 
     def __init__(self, config: GroundStationConfig, *, controller: Controller | None = None,
-                 trajectory: Trajectory | None = None, estimator: Ekf | None = None,
+                 trajectory: Trajectory | None = None, estimator: Estimator | None = None,
                  duration_s: float | None = None) -> None:
         self.config = config
         quad = quadrotor_params(config)
-        self.ekf = estimator or Ekf(EkfParams.from_config(
+        self.ekf: Estimator = estimator or Ekf(EkfParams.from_config(
             config.vehicle, config.estimator, config.vicon, config.safety, config.serial))
         self.controller = controller or controller_from_config(config)
         # built from the configuration unless given, shaped, and refused (TrajectoryError)
@@ -257,7 +258,7 @@ class FlightCore:
         force_g = 1.0
         if est is not None and self._held is not None:
             a1, a2, a3 = (self._held.acc - est.acc_bias).tolist()
-            force_g = math.sqrt(a1 * a1 + a2 * a2 + a3 * a3) / self.ekf.params.g
+            force_g = math.sqrt(a1 * a1 + a2 * a2 + a3 * a3) / self._quad.g
         return Observation(
             t=t, data_age_s=health.data_age_s, data_rate_hz=health.data_rate_hz,
             vicon_age_s=self._vicon_age(health), vicon_rate_hz=health.vicon_rate_hz,
