@@ -535,7 +535,6 @@ class SafetyConfig(ConfigModel):
     vicon_loss_land_s: float = Field(2.0, gt=0, le=30.0)  # land if Vicon has not returned
     link_loss_s: float = Field(0.3, gt=0, le=2.0)
     # no DATA this long = link lost; at most 2 s (the vehicle's own watchdog is 100 ms)
-    takeoff_height_m: PositiveFloat = 1.0  # Ch. 11: flights at 1 m
     takeoff_speed_m_s: PositiveFloat = 0.5  # climb rate for take-off, tuned
     land_speed_m_s: PositiveFloat = 0.3  # descent rate when landing, tuned
     preflight_timeout_s: float = Field(10.0, gt=0, le=600.0)  # give up if checks do not pass

@@ -123,3 +123,26 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     assert np.all(rows["state"][yaw_manual] == int(State.TRACK))
     sent_after = np.flatnonzero(rows["cmd_sent"][np.flatnonzero(yaw_manual)[-1] + 1:])
     assert rows["cmd_mask"][np.flatnonzero(yaw_manual)[-1] + 1 + sent_after[0]] == 0xF
+
+
+@pytest.mark.slow
+def test_demo_keeps_the_truth_with_the_log_and_reports_against_it(tmp_path: Path) -> None:
+    """`gs fly --demo` (what `make demo` runs): the lab's truth ends up inside the flight's
+    directory, and the flight's report is judged against it, not against the estimate."""
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-m", "groundstation", "fly", "--config", str(REPO / "config" / "sim.yaml"),
+         "--demo", "--trajectory", "hover", "--duration", "2", "--log-dir", str(tmp_path)],
+        capture_output=True, text=True, timeout=110, cwd=REPO)
+    assert out.returncode == 0, out.stdout + out.stderr
+    (log,) = [p for p in tmp_path.iterdir() if (p / "meta.json").exists()]
+    truth = np.load(log / "truth.npz")
+    assert len(truth["t"]) > 100
+    report = json.loads((log / "report" / "metrics.json").read_text())
+    assert report["truth_file"] == str(log / "truth.npz")
+    assert report["metrics"]["final_state"] == "DONE"
+    assert (log / "report" / "flight.png").stat().st_size > 10_000
+    assert "judged from virtual-lab ground truth" in out.stdout

@@ -23,6 +23,7 @@ Resource errors are reported in one line, never as a traceback.
 from __future__ import annotations
 
 import math
+import shutil
 import tempfile
 from collections.abc import Callable
 from contextlib import ExitStack
@@ -104,39 +105,44 @@ def fly_command(config: GroundStationConfig, *, duration_s: float | None = None,
     except (GroundStationError, ValueError, ArithmeticError) as exc:
         echo(f"error: {exc}")
         return EXIT_USAGE
-    try:
-        with ExitStack() as stack:
-            truth_file: Path | None = None
+    # the lab writes its truth when it stops (the ExitStack closes); the directory holding
+    # it outlives the stack so that the truth can be kept with the flight log
+    with ExitStack() as keep, ExitStack() as stack:
+        truth_file: Path | None = None
+        try:
             if demo:
                 if config.sim is None:
                     echo("error: --demo needs a configuration with a `sim:` section "
                          "(config/sim.yaml)")
                     return EXIT_USAGE
-                config, truth_file = _start_virtual_lab(config, stack, echo)
+                workdir = Path(keep.enter_context(tempfile.TemporaryDirectory(prefix="gs-demo-")))
+                config, truth_file = _start_virtual_lab(config, stack, workdir, echo)
             summary = FlightDaemon(config, duration_s=duration_s, progress=echo).run()
-    except ConfigError as exc:
-        echo(f"error: {exc}")
-        return EXIT_USAGE
-    except GroundStationError as exc:  # a resource could not be opened: nothing was flown
-        echo(f"error: {exc}")
-        return EXIT_NOT_STARTED
-    for line in summary_lines(summary):
-        echo(line)
-    if demo and summary.log_dir:
-        _plot(summary.log_dir, truth_file, echo)
+        except ConfigError as exc:
+            echo(f"error: {exc}")
+            return EXIT_USAGE
+        except GroundStationError as exc:  # a resource could not be opened: nothing flown
+            echo(f"error: {exc}")
+            return EXIT_NOT_STARTED
+        finally:
+            stack.close()  # the lab stops and writes its truth
+        for line in summary_lines(summary):
+            echo(line)
+        if demo and summary.log_dir:
+            _report(summary.log_dir, truth_file, echo)
     return int(summary.outcome)
 
 
-def _start_virtual_lab(config: GroundStationConfig, stack: ExitStack, echo: Echo
-                       ) -> tuple[GroundStationConfig, Path]:
+def _start_virtual_lab(config: GroundStationConfig, stack: ExitStack, workdir: Path,
+                       echo: Echo) -> tuple[GroundStationConfig, Path]:
     """Start the installed virtual lab (:func:`groundstation.lab.virtual_lab`) in a child
-    process for the block ``stack`` closes; return the configuration pointing at its pty
-    and its truth file. A process of its own, as the vehicle is: a pause of this one (a
-    loaded machine) cannot stop the vehicle's clock."""
+    process, working in ``workdir``, for the block ``stack`` closes; return the
+    configuration pointing at its pty and its truth file (written when it stops). A
+    process of its own, as the vehicle is: a pause of this one (a loaded machine) cannot
+    stop the vehicle's clock."""
     from groundstation.lab import virtual_lab
 
     plugin = virtual_lab()
-    workdir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="gs-demo-")))
     try:
         lab = stack.enter_context(plugin.start(config, workdir)).announcement
     except RuntimeError as exc:
@@ -146,12 +152,25 @@ def _start_virtual_lab(config: GroundStationConfig, stack: ExitStack, echo: Echo
     return apply_overrides(config, {"serial.port": lab.serial_port}), lab.truth_file
 
 
-def _plot(log_dir: str, truth_file: Path | None, echo: Echo) -> None:
-    from groundstation.loop.plot import plot_flight
+def _report(log_dir: str, truth_file: Path | None, echo: Echo) -> None:
+    """Keep the virtual lab's truth in the flight's directory (``truth.npz``) and write the
+    flight's report (``gs report``) judged against it: ``report/`` with metrics.json,
+    report.md and flight.png (the figure only where matplotlib is installed)."""
+    from groundstation.evaluation.report import report_flight
 
+    truth: Path | None = None
+    if truth_file is not None and truth_file.exists():
+        truth = Path(log_dir) / "truth.npz"
+        shutil.copyfile(truth_file, truth)
     try:
-        png = plot_flight(log_dir, Path(log_dir) / "flight.png", truth_file)
+        try:
+            report = report_flight(log_dir, truth)
+        except GroundStationError as exc:  # matplotlib missing: the metrics still count
+            echo(f"no figure: {exc}")
+            report = report_flight(log_dir, truth, figures=False)
     except GroundStationError as exc:
-        echo(f"no plot: {exc}")
+        echo(f"no report: {exc}")
         return
-    echo(f"  plot of the flown path against the reference: {png}")
+    echo(f"  report, judged from {report.record.truth_source}: {report.report_md}")
+    if report.figure is not None:
+        echo(f"  figure of the flown path against the reference: {report.figure}")
