@@ -49,6 +49,8 @@ class RejectReason(StrEnum):
     COMMAND_RANGE = "command_range"  # COMMAND value or ctrl mask out of range
     COMMAND_CHECKSUM = "command_checksum"  # COMMAND additive checksum wrong
     CONFIG_MASK = "config_mask"  # CONFIG asks for unknown sensor blocks
+    BAD_ACK = "bad_ack"  # LL dialect: `>a` not followed by a byte and `a<`
+    BAD_REQUEST = "bad_request"  # LL dialect, vehicle side: `>*>` + an unknown request
 
 
 class PayloadError(ProtocolError):
