@@ -8,9 +8,12 @@ payloads and redraws a few times a second until ``duration`` or Ctrl-C.
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from typing import Any, TextIO
 
 from groundstation.telemetry.client import TelemetryClient
@@ -136,6 +139,22 @@ def render(
     return lines
 
 
+@contextmanager
+def _until_interrupted() -> Iterator[threading.Event]:
+    """An event Ctrl-C sets (in the main thread; elsewhere it is never set). A flag instead
+    of KeyboardInterrupt, so the interrupt never lands inside ZeroMQ's calls: the view
+    ends within one receive timeout, always cleanly."""
+    stop = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+    previous = signal.signal(signal.SIGINT, lambda _signum, _frame: stop.set())
+    try:
+        yield stop
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def run_monitor(
     endpoint: str, duration: float | None = None, *, out: TextIO | None = None,
     refresh_s: float = 0.2,
@@ -149,20 +168,19 @@ def run_monitor(
     last_rx: float | None = None
     start = time.monotonic()
     end = None if duration is None else start + duration
-    with TelemetryClient(endpoint) as client:
-        try:
-            while end is None or time.monotonic() < end:
-                redraw_at = time.monotonic() + refresh_s
-                while (left := redraw_at - time.monotonic()) > 0:
-                    message = client.receive(left)
-                    if message is not None:
-                        latest[message[0]] = message[1]
-                        received, last_rx = received + 1, time.monotonic()
-                age = None if last_rx is None else time.monotonic() - last_rx
-                lines = render(latest.get(TOPIC_STATE), latest.get(TOPIC_HEALTH),
-                               endpoint=endpoint, received=received, age_s=age)
-                drawn = _draw(stream, lines, drawn)
-        except KeyboardInterrupt:
+    with TelemetryClient(endpoint) as client, _until_interrupted() as stop:
+        while not stop.is_set() and (end is None or time.monotonic() < end):
+            redraw_at = time.monotonic() + refresh_s
+            while not stop.is_set() and (left := redraw_at - time.monotonic()) > 0:
+                message = client.receive(left)
+                if message is not None:
+                    latest[message[0]] = message[1]
+                    received, last_rx = received + 1, time.monotonic()
+            age = None if last_rx is None else time.monotonic() - last_rx
+            lines = render(latest.get(TOPIC_STATE), latest.get(TOPIC_HEALTH),
+                           endpoint=endpoint, received=received, age_s=age)
+            drawn = _draw(stream, lines, drawn)
+        if stop.is_set():
             stream.write("\n")
     stream.flush()
     return received
