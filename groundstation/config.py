@@ -162,9 +162,38 @@ def _all_channels() -> list[Channel]:
 
 
 # --------------------------------------------------------------------------- serial link
-class SerialConfig(ConfigModel):
-    """The serial link to the X-3D (``spec/x3d-serial-protocol.md``)."""
+class LlConfig(ConfigModel):
+    """The AscTec LL dialect's link schedule (``serial.protocol: asctec-ll``; docs/protocol.md).
 
+    The vehicle sends only what is polled: IMU_RAWDATA every ``serial.data_period_ms``,
+    LL_STATUS and RC_DATA with every ``status_every``-th and ``rc_every``-th of those polls.
+    """
+
+    status_every: int = Field(20, ge=1, le=1000)
+    # LL_STATUS (battery, serial switch, motors) at 5 Hz with 100 Hz IMU polls; design choice
+    rc_every: int = Field(10, ge=1, le=1000)
+    # RC_DATA (the pilot's sticks) at 10 Hz; design choice within the line budget
+    answer_timeout_ms: float = Field(20.0, gt=0, le=500.0)
+    # half-duplex turn: the next poll waits for the last one's answers at most this long
+    ack_timeout_ms: float = Field(40.0, gt=0, le=500.0)
+    # a command whose 5-byte acknowledgement has not arrived by then is counted missing
+    fallback_ms: float = Field(100.0, ge=20.0, le=1000.0)
+    # the LL firmware's fallback after the last command: undocumented; AscTec's later SDK
+    # used 200 ms; 100 ms like the X-3D's watchdog until measured on the vehicle
+    rc_channels: tuple[int, int, int, int] = (0, 1, 2, 3)
+    # RC_DATA channels_out index of pitch, roll, thrust, yaw: AscTec SDK order, unverified
+    motor_start_yaw: Literal[-2047, 2047] = -2047
+    # the motor gesture's yaw to start (the opposite stops): drivers disagree on the sign
+    motor_gesture_s: float = Field(0.5, gt=0, le=3.0)  # how long the gesture is held
+
+
+class SerialConfig(ConfigModel):
+    """The serial link to the vehicle (X-3D dialect ``spec/x3d-serial-protocol.md`` or the
+    AscTec LL dialect; docs/protocol.md)."""
+
+    protocol: Literal["x3d", "asctec-ll"] = "x3d"
+    # the vehicle's dialect: configured, never guessed from the bytes (the dialects share
+    # descriptor 0x01 for different packets)
     port: str = "/dev/ttyUSB0"  # the lab's XBee adapter; a pty path or pyserial URL also works
     baud: int = Field(57600, gt=0, le=4_000_000)
     # spec section 1 default (design choice); at most the 4 Mbaud of the fastest USB UARTs
@@ -178,6 +207,7 @@ class SerialConfig(ConfigModel):
     stale_command_s: float = Field(0.25, gt=0, le=1.0)
     # keep-alive resends the loop's last command only this long, then hands back (mask 0)
     handover_blend_s: NonNegFloat = 1.0  # bumpless-transfer blend time; thesis silent
+    ll: LlConfig = LlConfig()  # read with protocol asctec-ll only
 
     @field_validator("sensors")
     @classmethod
@@ -187,6 +217,15 @@ class SerialConfig(ConfigModel):
         if "gyro" not in value or "acc" not in value:
             raise ValueError("the estimator needs the 'gyro' and 'acc' blocks")
         return value
+
+    @model_validator(mode="after")
+    def _commands_within_the_fallback(self) -> SerialConfig:
+        if self.protocol == "asctec-ll" and 2000.0 / self.command_rate_hz > self.ll.fallback_ms:
+            raise ValueError(
+                f"command_rate_hz {self.command_rate_hz:g}: a command period of "
+                f"{1000.0 / self.command_rate_hz:.0f} ms is more than half the vehicle's "
+                f"{self.ll.fallback_ms:g} ms fallback (serial.ll.fallback_ms)")
+        return self
 
     @property
     def sensor_mask(self) -> int:

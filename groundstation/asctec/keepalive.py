@@ -51,6 +51,8 @@ class CommandSchedule:
         ``1 / command_rate + slack`` [s] (>= 0; the sum must stay under the watchdog).
     history : number of recent COMMAND write times kept.
     logger : structlog logger for gap warnings.
+    watchdog : the vehicle's fallback after the last command [s] (the X-3D's 100 ms;
+        the AscTec LL dialect's is configured, ``serial.ll.fallback_ms``).
     """
 
     def __init__(
@@ -61,15 +63,18 @@ class CommandSchedule:
         slack: float = 0.0,
         history: int = 256,
         logger: structlog.typing.FilteringBoundLogger | None = None,
+        watchdog: float = WATCHDOG_S,
     ) -> None:
-        if not command_rate > 1.0 / WATCHDOG_S:
-            raise ConfigError(f"command_rate must exceed 10 Hz (watchdog), got {command_rate!r}")
+        if not command_rate > 1.0 / watchdog:
+            raise ConfigError(f"command_rate must exceed {1.0 / watchdog:g} Hz (watchdog), "
+                              f"got {command_rate!r}")
         if not stale_after > 0.0:
             raise ConfigError(f"stale_after must be > 0 s, got {stale_after!r}")
-        if not (slack >= 0.0 and 1.0 / command_rate + slack < WATCHDOG_S):
+        if not (slack >= 0.0 and 1.0 / command_rate + slack < watchdog):
             raise ConfigError(f"slack must be >= 0 s and leave the keep-alive period under "
                               f"the watchdog, got {slack!r}")
         self.period = 1.0 / command_rate
+        self.gap_warning = watchdog / 2
         self.slack = float(slack)
         self.stale_after = float(stale_after)
         self._log = logger if logger is not None else structlog.get_logger("groundstation.asctec")
@@ -137,12 +142,12 @@ class CommandSchedule:
         gap = t - last
         if self._armed_at is not None and last >= self._armed_at:
             self.max_gap = max(self.max_gap, gap)
-            if gap > GAP_WARNING_S:
+            if gap > self.gap_warning:
                 self.gap_warnings += 1
                 self._log.warning(
                     "command gap exceeds half the watchdog",
                     gap_s=round(gap, 4),
-                    limit_s=GAP_WARNING_S,
+                    limit_s=self.gap_warning,
                 )
         return gap
 

@@ -39,7 +39,7 @@ import structlog
 from groundstation.asctec.crc import DEFAULT_PROFILE, profile_init
 from groundstation.asctec.decoder import StreamDecoder, encode_frame
 from groundstation.asctec.keepalive import GAP_WARNING_S, CommandSchedule
-from groundstation.asctec.messages import CommandMsg, DataMsg, Message
+from groundstation.asctec.messages import CommandMsg, ConfigMsg, DataMsg, Message
 from groundstation.asctec.stats import DataStreamMonitor, LinkStats
 from groundstation.errors import ConfigError, LinkError
 
@@ -98,6 +98,9 @@ class SerialLink:
     queue_size : DATA samples held for :meth:`get`; the oldest is dropped when full.
     rate_window : window of the DATA rate measurement [s].
     write_timeout : a write blocked this long fails with LinkError [s].
+    stream : the CONFIG :meth:`start_stream` sends; DATA of another block mask is then
+        dropped and counted (``unexpected_data``): an AscTec LL IMU_RAWDATA can pass for
+        X-3D DATA of mask 0x1B or 0x1D.
 
     Raises LinkError if the port cannot be opened, ConfigError for bad parameters.
     """
@@ -117,6 +120,7 @@ class SerialLink:
         queue_size: int = 256,
         rate_window: float = 1.0,
         write_timeout: float = 1.0,
+        stream: ConfigMsg | None = None,
     ) -> None:
         if queue_size < 1:
             raise ConfigError(f"queue_size must be >= 1, got {queue_size}")
@@ -131,6 +135,8 @@ class SerialLink:
         self._cond = threading.Condition()  # guards queue, decoder, monitor, counters
         self._write_lock = threading.Lock()  # serialises writes and the schedule
         self._queue_dropped = 0
+        self._unexpected = 0
+        self._stream = stream
         self._bytes_out = 0
         self._error: LinkError | None = None
         self._flew = False
@@ -164,6 +170,7 @@ class SerialLink:
             command_rate=config.command_rate_hz,
             keepalive_slack=slack,
             stale_after=config.stale_command_s,
+            stream=ConfigMsg(config.sensor_mask, config.data_period_ms),
         )
 
     # --- user API -----------------------------------------------------------------
@@ -183,6 +190,13 @@ class SerialLink:
     def armed(self) -> bool:
         """True while the keep-alive guarantees the COMMAND rate."""
         return self._keepalive is not None
+
+    def start_stream(self) -> None:
+        """Send the CONFIG the link was built with (the vehicle then streams DATA); again
+        whenever the stream stopped. ConfigError if the link has none."""
+        if self._stream is None:
+            raise ConfigError("this link was built without a CONFIG to start the stream with")
+        self.send(self._stream)
 
     def get(self, timeout: float) -> ReceivedData | None:
         """The oldest queued DATA sample, waiting up to ``timeout`` [s]; None on timeout.
@@ -249,6 +263,7 @@ class SerialLink:
                 monitor.counter_repeats,
             )
             dropped = self._queue_dropped
+            unexpected = self._unexpected
         with self._write_lock:
             s = self._schedule
             return LinkStats(
@@ -267,6 +282,7 @@ class SerialLink:
                 keepalive_releases=s.releases,
                 max_command_gap=s.max_gap,
                 command_gap_warnings=s.gap_warnings,
+                unexpected_data=unexpected,
             )
 
     def close(self) -> None:
@@ -356,8 +372,12 @@ class SerialLink:
         """Decode ``chunk`` received at ``t`` and queue its DATA messages."""
         with self._cond:
             queued = False
+            expected = self._stream.sensor_mask if self._stream is not None else None
             for item in self._decoder.feed(chunk):
                 if isinstance(item, DataMsg):
+                    if expected is not None and item.mask != expected:
+                        self._unexpected += 1  # not the stream we asked for: never fused
+                        continue
                     self._monitor.update(item.counter, t)
                     if len(self._queue) == self._queue.maxlen:
                         self._queue_dropped += 1

@@ -75,6 +75,14 @@ class LinkStats:
     keepalive_releases : mask-0 COMMANDs the keep-alive sent for a stale loop
     max_command_gap : longest interval between COMMAND writes while armed [s]
     command_gap_warnings : gaps longer than half the 100 ms watchdog while armed
+    unexpected_data : X-3D: DATA frames of another block mask than the one configured,
+        dropped (an LL IMU_RAWDATA can look like one; spec hazard)
+    polls_sent, polls_unanswered : LL dialect: polls written, and of those not answered
+        completely within ``serial.ll.answer_timeout_ms``
+    acks, acks_missing : LL dialect: commands acknowledged, and not acknowledged within
+        ``serial.ll.ack_timeout_ms`` (corrupt acknowledgements are the ``bad_ack``
+        rejections)
+    ack_times : LL dialect: recent command-to-acknowledgement times [s], oldest first
     """
 
     bytes_in: int
@@ -92,3 +100,9 @@ class LinkStats:
     keepalive_releases: int
     max_command_gap: float
     command_gap_warnings: int
+    unexpected_data: int = 0
+    polls_sent: int = 0
+    polls_unanswered: int = 0
+    acks: int = 0
+    acks_missing: int = 0
+    ack_times: tuple[float, ...] = ()

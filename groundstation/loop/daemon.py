@@ -58,8 +58,8 @@ from functools import partial
 import numpy as np
 import structlog
 
-from groundstation.asctec.link import SerialLink
-from groundstation.asctec.messages import CHANNELS, ConfigMsg
+from groundstation.asctec.dialect import VehicleLink, open_link
+from groundstation.asctec.messages import CHANNELS
 from groundstation.config import GroundStationConfig, dump_config
 from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
@@ -180,7 +180,6 @@ class FlightDaemon:
         self._stop_event = stop
         self._stops = StopRequests(config.safety.second_signal_after_s)
         self._period = config.serial.data_period_ms / 1000.0
-        self._config_msg = ConfigMsg(config.serial.sensor_mask, config.serial.data_period_ms)
         self._stats = _Stats()
         self.log_dir = ""
         self.telemetry_endpoint: str | None = None
@@ -214,7 +213,7 @@ class FlightDaemon:
             stack.callback(notifier.stopping, "stopping: vehicle handed back")
             # first: the serial, Vicon and ZeroMQ threads started below inherit it
             stack.enter_context(fifo_priority(cfg.realtime.fifo_priority))
-            link = SerialLink.from_config(cfg.serial)
+            link = open_link(cfg.serial)  # the configured dialect
             stack.callback(link.close)  # sends the final COMMAND with ctrl mask 0
             vicon = ViconClient.from_config(cfg.vicon, cfg.safety).start()
             stack.callback(vicon.close)
@@ -235,7 +234,7 @@ class FlightDaemon:
             # its full collection runs now, before the vehicle streams, and freezes all
             # that is open
             pacer = stack.enter_context(CollectorPacer(cfg.realtime.paced_gc))
-            link.send(self._config_msg)
+            link.start_stream()
             notifier.ready("preflight")
             self.ready.set()
             log.info("flight starting", port=cfg.serial.port, vicon_port=cfg.vicon.port,
@@ -281,7 +280,7 @@ class FlightDaemon:
             scheduled = deadline
             if start - clock.last_config > RESEND_CONFIG_AFTER_S and \
                     self._front.data_age(start) > RESEND_CONFIG_AFTER_S:
-                link.send(self._config_msg)  # the stream stopped: ask for it again
+                link.start_stream()  # the stream stopped: ask for it again
                 clock.last_config = start
         vicon_rate, vicon_age = io.vicon.rate_and_age()
         health = self._front.health(start, vicon_age, vicon_rate)
@@ -365,7 +364,7 @@ class FlightDaemon:
         return {"ok": True, "auto": [c for c in CHANNELS if c in auto_now],
                 "state": core.state.name}
 
-    def _snapshot(self, result: TickResult, link: SerialLink, vicon: ViconClient
+    def _snapshot(self, result: TickResult, link: VehicleLink, vicon: ViconClient
                   ) -> dict[str, dict[str, object]]:
         status = self._front.status
         sticks = result.sticks if result.sticks is not None else status.pilot
@@ -414,7 +413,7 @@ class FlightDaemon:
 class _Io:
     """What the loop talks to, opened by :meth:`FlightDaemon.run`."""
 
-    link: SerialLink
+    link: VehicleLink
     vicon: ViconClient
     recorder: FlightRecorder
     telemetry: TelemetryPublisher

@@ -14,6 +14,7 @@ import numpy as np
 
 from groundstation.asctec.blocks import DATA_SIZE_BY_MASK
 from groundstation.asctec.decoder import FRAME_OVERHEAD
+from groundstation.asctec.ll import COMMAND_SIZE, ImuRawData
 from groundstation.asctec.messages import CommandMsg, DataMsg
 from groundstation.config import GroundStationConfig
 from groundstation.model.quadrotor import QuadrotorParams
@@ -64,9 +65,14 @@ def _vec3(values: list[float]) -> tuple[float, float, float]:
 def wire_time_s(config: GroundStationConfig) -> float:
     """Time [s] one DATA frame (of the configured blocks) and one COMMAND frame spend on
     the serial wire at the configured baud: 10 bits per byte (8N1), frame = N + 11
-    bytes (spec sections 1 and 3)."""
-    data_bytes = DATA_SIZE_BY_MASK[config.serial.sensor_mask] + FRAME_OVERHEAD
-    command_bytes = max(CommandMsg.PAYLOAD_SIZES) + FRAME_OVERHEAD
+    bytes (spec sections 1 and 3); in the AscTec LL dialect an IMU_RAWDATA frame (39
+    bytes) and a 17-byte command."""
+    if config.serial.protocol == "asctec-ll":  # IMU_RAWDATA frame, unframed `>*>di` command
+        data_bytes = max(ImuRawData.PAYLOAD_SIZES) + FRAME_OVERHEAD
+        command_bytes = COMMAND_SIZE
+    else:
+        data_bytes = DATA_SIZE_BY_MASK[config.serial.sensor_mask] + FRAME_OVERHEAD
+        command_bytes = max(CommandMsg.PAYLOAD_SIZES) + FRAME_OVERHEAD
     return 10.0 * (data_bytes + command_bytes) / config.serial.baud
 
 

@@ -29,8 +29,8 @@ Fields (frames: NED earth, FRD body; quaternions scalar-first, R(q) = eCb)::
     t                    s        time.monotonic() when the tick was recorded
     imu_t                s        monotonic receive time of the IMU sample
     imu_counter          -        DATA sample counter (uint16, wraps)
-    gyro_counts  (3,)    count    raw 12-bit gyro ADC counts, FRD axes
-    acc_counts   (3,)    count    raw 12-bit accelerometer counts, FRD axes
+    gyro_counts  (3,)    count    raw gyro ADC counts, FRD axes (X-3D 12-bit, LL int16)
+    acc_counts   (3,)    count    raw accelerometer counts, FRD axes (X-3D 12-bit, LL int16)
     gyro         (3,)    rad/s    scaled body rates, FRD
     acc          (3,)    m/s^2    scaled specific force, FRD
     vicon_valid          bool     a Vicon pose was used this tick
@@ -114,8 +114,8 @@ _SCHEMA: tuple[tuple[str, str, tuple[str, ...] | None, str | tuple[str, ...]], .
     ("t", "<f8", None, "s"),
     ("imu_t", "<f8", None, "s"),
     ("imu_counter", "<u2", None, "1"),
-    ("gyro_counts", "<u2", _XYZ, "count"),
-    ("acc_counts", "<u2", _XYZ, "count"),
+    ("gyro_counts", "<i4", _XYZ, "count"),
+    ("acc_counts", "<i4", _XYZ, "count"),
     ("gyro", "<f8", _XYZ, "rad/s"),
     ("acc", "<f8", _XYZ, "m/s^2"),
     ("vicon_valid", "|b1", None, "bool"),

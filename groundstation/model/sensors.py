@@ -62,6 +62,9 @@ class AxisScaling:
 
     scale: tuple[float, float, float]
     zero: tuple[float, float, float] = (2048.0, 2048.0, 2048.0)
+    count_range: tuple[int, int] = (0, ADC_MAX)
+    """The ADC's output range [counts]: the X-3D's 12 bits, or the AscTec LL dialect's
+    int16 (-32768, 32767); only :meth:`to_counts` uses it (a vehicle model's saturation)."""
     _k: FloatArray = field(init=False, repr=False, compare=False)
     _z: FloatArray = field(init=False, repr=False, compare=False)
 
@@ -81,12 +84,14 @@ class AxisScaling:
         return self._k * (np.asarray(counts, dtype=float) - self._z)
 
     def to_counts(self, si: FloatArray) -> FloatArray:
-        """(3,) SI values -> (3,) integer counts (as floats), rounded and clipped to 0..4095.
+        """(3,) SI values -> (3,) integer counts (as floats), rounded and clipped to
+        :attr:`count_range`.
 
         Clipping models ADC saturation; use :meth:`to_counts_int` for wire values.
         """
         raw = np.rint(np.asarray(si, dtype=float) / self._k + self._z)
-        return np.clip(raw, 0.0, float(ADC_MAX))
+        lo, hi = self.count_range
+        return np.clip(raw, float(lo), float(hi))
 
     def to_counts_int(self, si: FloatArray) -> tuple[int, int, int]:
         """Like :meth:`to_counts` but as a tuple of Python ints (for packing)."""

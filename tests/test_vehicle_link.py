@@ -1,0 +1,449 @@
+"""One link test suite, run against both serial dialects (issue 16).
+
+Like python-can's back-to-back tests, every behaviour the flight loop relies on is
+checked through the one interface (:func:`groundstation.asctec.dialect.open_link`)
+for the X-3D and the AscTec LL dialect alike. The vehicle is the master side of a real
+pseudo-terminal, played by a small responder thread per dialect that speaks the wire
+format from the specs (its encoders are the project's, whose bytes the codec tests
+check against the specs' vectors): the X-3D one streams DATA after CONFIG, the LL one
+answers polls and acknowledges commands.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+import select
+import threading
+import time
+import tty
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+
+import pytest
+
+from groundstation.asctec.blocks import AxisCounts, RcBlock, StatusBlock
+from groundstation.asctec.decoder import RejectedFrame, StreamDecoder, encode_frame
+from groundstation.asctec.dialect import VehicleLink, open_link
+from groundstation.asctec.ll import (
+    ImuRawData,
+    LlRequestDecoder,
+    LlStatus,
+    Poll,
+    PollMask,
+    RcData,
+    encode_ack,
+)
+from groundstation.asctec.ll_link import PollSchedule
+from groundstation.asctec.messages import CommandMsg, ConfigMsg, DataMsg
+from groundstation.config import validate_config
+from groundstation.errors import ConfigError
+from groundstation.loop.inputs import DataFrontEnd, VehicleStatus
+from groundstation.types import Sticks
+
+DIALECTS = ["x3d", "asctec-ll"]
+WAIT = 5.0  # upper bound for anything to happen; tests never sleep this long
+PERIOD = 0.01
+
+
+@dataclass
+class VehicleState:
+    """What the test vehicle reports, the same in both dialects."""
+
+    gyro: tuple[int, int, int] = (2048, 2050, 2046)
+    acc: tuple[int, int, int] = (2048, 2048, 1300)
+    battery_mv: int = 11800
+    switch_on: bool = True
+    pilot: Sticks = field(default_factory=lambda: Sticks(roll=-30, pitch=20, yaw=5, thrust=1500))
+
+
+class PtyVehicle:
+    """The vehicle side of a pty: a responder thread for one dialect.
+
+    silent : answer nothing (a vehicle that stopped); drop_every_ack : LL, acknowledge
+    only every n-th command; corrupt : a function applied to every frame sent.
+    """
+
+    def __init__(self, dialect: str) -> None:
+        self.dialect = dialect
+        self.fd, slave = os.openpty()
+        tty.setraw(self.fd)
+        self.path = os.ttyname(slave)
+        self._slave = slave
+        self.state = VehicleState()
+        self.commands: list[tuple[float, CommandMsg]] = []
+        self.polls: list[tuple[float, int]] = []
+        self.configs: list[ConfigMsg] = []
+        self.silent = False
+        self.drop_every_ack = 0
+        self.repeat_values = False
+        self.corrupt: Callable[[bytes], bytes] = lambda frame: frame
+        self.raw_frames: list[bytes] = []  # extra frames to send with the next sample
+        self.sample_delay = 0.0  # LL: wait this long before answering a poll
+        self._stop = threading.Event()
+        self._counter = 0
+        self._step = 0
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    # -- what the vehicle sends
+    def _imu_counts(self) -> tuple[tuple[int, int, int], tuple[int, int, int]]:
+        if not self.repeat_values:
+            self._step += 1
+        g = self.state.gyro
+        return (g[0] + self._step % 3, g[1], g[2]), self.state.acc
+
+    def _x3d_sample(self) -> bytes:
+        s = self.state
+        gyro, acc = self._imu_counts()
+        p = s.pilot
+        status = StatusBlock(s.battery_mv, 0x05 if self.commands else 0x04,
+                             self.commands[-1][1].ctrl if self.commands else 0)
+        rc = RcBlock(p.pitch, p.roll, p.yaw, p.thrust, 4095 if s.switch_on else 0)
+        self._counter = (self._counter + 1) & 0xFFFF
+        return encode_frame(DataMsg(self._counter, status, AxisCounts(*gyro), AxisCounts(*acc),
+                                    None, rc))
+
+    def _ll_answer(self, mask: int) -> bytes:
+        s = self.state
+        out = b""
+        if mask & PollMask.LL_STATUS:
+            applying = bool(self.commands and self.commands[-1][1].ctrl)
+            mode = (0x20 if s.switch_on else 0) | (0x40 if applying else 0)
+            out += encode_frame(LlStatus(s.battery_mv, s.battery_mv, flight_mode=mode))
+        if mask & PollMask.IMU_RAWDATA:
+            gyro, acc = self._imu_counts()
+            out += encode_frame(ImuRawData(101325, gyro, (0, 0, 0), acc))
+        if mask & PollMask.RC_DATA:
+            p = s.pilot
+            ch = (p.pitch + 2048, p.roll + 2048, p.thrust, p.yaw + 2048,
+                  4095 if s.switch_on else 0, 2048, 2048, 2048)
+            out += encode_frame(RcData(ch, ch, 1))
+        return out
+
+    def _send(self, data: bytes) -> None:
+        extra, self.raw_frames = b"".join(self.raw_frames), []
+        with contextlib.suppress(OSError):
+            os.write(self.fd, extra + self.corrupt(data))
+
+    def _run(self) -> None:
+        x3d, ll = StreamDecoder(), LlRequestDecoder()
+        next_sample: float | None = None
+        acks = 0
+        while not self._stop.is_set():
+            timeout = 0.002 if next_sample is not None else 0.02
+            if select.select([self.fd], [], [], timeout)[0]:
+                try:
+                    data = os.read(self.fd, 4096)
+                except OSError:  # EIO: no link holds the port now; another may open it
+                    time.sleep(0.01)
+                    continue
+                now = time.monotonic()
+                items = x3d.feed(data) if self.dialect == "x3d" else ll.feed(data)
+                for item in items:
+                    if isinstance(item, CommandMsg):
+                        with self._lock:
+                            self.commands.append((now, item))
+                        if self.dialect == "asctec-ll" and not self.silent:
+                            acks += 1
+                            if not self.drop_every_ack or acks % self.drop_every_ack == 0:
+                                self._send(encode_ack(0))
+                    elif isinstance(item, ConfigMsg):
+                        self.configs.append(item)
+                        next_sample = now
+                    elif isinstance(item, Poll):
+                        with self._lock:
+                            self.polls.append((now, item.mask))
+                        if not self.silent:
+                            if self.sample_delay:
+                                time.sleep(self.sample_delay)
+                            self._send(self._ll_answer(item.mask))
+            if next_sample is not None and time.monotonic() >= next_sample:
+                next_sample += PERIOD
+                if not self.silent:
+                    self._send(self._x3d_sample())
+
+    def received_commands(self) -> list[CommandMsg]:
+        with self._lock:
+            return [c for _, c in self.commands]
+
+    def release_slave(self) -> None:
+        if self._slave >= 0:
+            os.close(self._slave)
+            self._slave = -1
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.release_slave()
+        os.close(self.fd)
+
+
+@pytest.fixture(params=DIALECTS)
+def vehicle(request: pytest.FixtureRequest) -> Iterator[PtyVehicle]:
+    v = PtyVehicle(request.param)
+    yield v
+    v.close()
+
+
+def link_for(vehicle: PtyVehicle, **serial: object) -> VehicleLink:
+    cfg = validate_config({"serial": {"protocol": vehicle.dialect, "port": vehicle.path,
+                                      **serial}})
+    link = open_link(cfg.serial)
+    vehicle.release_slave()
+    return link
+
+
+def until(condition: Callable[[], bool], timeout: float = WAIT) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.005)
+
+
+def samples(link: VehicleLink, n: int) -> list[DataMsg]:
+    out = []
+    deadline = time.monotonic() + WAIT
+    while len(out) < n:
+        assert time.monotonic() < deadline, f"only {len(out)} samples"
+        rx = link.get(timeout=0.1)
+        if rx is not None:
+            out.append(rx.msg)
+    return out
+
+
+def test_the_stream_starts_on_request_and_delivers_the_counts(vehicle: PtyVehicle) -> None:
+    with link_for(vehicle) as link:
+        assert link.get(timeout=0.1) is None  # nothing flows before it is asked for
+        link.start_stream()
+        got = samples(link, 20)
+    assert all(m.acc is not None and (m.acc.x, m.acc.y, m.acc.z) == vehicle.state.acc
+               for m in got)
+    counters = [m.counter for m in got]
+    assert all((b - a) & 0xFFFF == 1 for a, b in itertools.pairwise(counters))
+
+
+def test_both_dialects_give_the_loop_the_same_vehicle_status(vehicle: PtyVehicle) -> None:
+    """Battery, switch, pilot sticks and whether commands are applied: the flight core sees
+    the same :class:`VehicleStatus` whichever dialect carried it."""
+    cfg = validate_config({"serial": {"protocol": vehicle.dialect, "port": vehicle.path}})
+    front = DataFrontEnd(cfg)
+    with link_for(vehicle) as link:
+        link.start_stream()
+        link.send(CommandMsg(thrust=1000, ctrl=0x0F))
+        deadline = time.monotonic() + WAIT
+        while not (front.status.applying and front.status.pilot.thrust == 1500):
+            assert time.monotonic() < deadline, front.status
+            rx = link.get(timeout=0.1)
+            if rx is not None:
+                front.receive(rx.t, rx.msg)
+    assert front.status == VehicleStatus(pilot=vehicle.state.pilot, pilot_enabled=True,
+                                         applying=True, battery_v=11.8,
+                                         flags=front.status.flags,
+                                         applied_mask=0x0F)
+    assert front.status.flags & 0x01  # serial control active
+
+
+def test_commands_arrive_as_sent(vehicle: PtyVehicle) -> None:
+    sent = [CommandMsg(pitch=-100, roll=250, yaw=0, thrust=1800, ctrl=0x0F),
+            CommandMsg(pitch=3, roll=-4, yaw=-2048, thrust=0, ctrl=0x0C)]
+    with link_for(vehicle) as link:
+        for cmd in sent:
+            link.send(cmd)
+        until(lambda: len(vehicle.received_commands()) >= 2)
+        assert vehicle.received_commands()[:2] == sent
+
+
+def test_keepalive_holds_the_rate_then_hands_back(vehicle: PtyVehicle) -> None:
+    with link_for(vehicle, command_rate_hz=50.0, stale_command_s=0.2) as link:
+        link.start_stream()
+        link.send(CommandMsg(thrust=1200, ctrl=0x0F))
+        link.arm()
+        until(lambda: any(c.ctrl == 0 for c in vehicle.received_commands()))
+        stats = link.stats()
+    with vehicle._lock:
+        times = [t for t, c in vehicle.commands if c.ctrl]
+    gaps = [b - a for a, b in itertools.pairwise(times)]
+    assert times[-1] - times[0] >= 0.15  # held for about stale_command_s
+    assert max(gaps) < 0.05  # never half the 100 ms fallback
+    assert stats.keepalive_resends >= 5
+
+
+def test_close_hands_back_only_if_it_flew(vehicle: PtyVehicle) -> None:
+    with link_for(vehicle) as link:
+        link.start_stream()
+        samples(link, 3)
+    time.sleep(0.05)
+    assert vehicle.received_commands() == []  # another station's vehicle is left alone
+    with link_for_reopened(vehicle) as link:
+        link.send(CommandMsg(thrust=900, ctrl=0x08))
+    until(lambda: len(vehicle.received_commands()) >= 2)
+    assert vehicle.received_commands()[-1] == CommandMsg.release()
+
+
+def link_for_reopened(vehicle: PtyVehicle) -> VehicleLink:
+    cfg = validate_config({"serial": {"protocol": vehicle.dialect, "port": vehicle.path}})
+    return open_link(cfg.serial)
+
+
+def test_a_vehicle_that_stops_answering_is_a_silent_stream(vehicle: PtyVehicle) -> None:
+    with link_for(vehicle) as link:
+        link.start_stream()
+        samples(link, 5)
+        vehicle.silent = True
+        time.sleep(0.05)
+        while link.get(timeout=0.0) is not None:
+            pass
+        assert link.get(timeout=0.3) is None  # the loop sees the data age grow: link loss
+        vehicle.silent = False
+        if vehicle.dialect == "x3d":
+            link.start_stream()  # what the daemon does after 0.5 s without DATA
+        assert len(samples(link, 3)) == 3  # and it comes back
+        stats = link.stats()
+    if vehicle.dialect == "asctec-ll":
+        assert stats.polls_unanswered >= 10  # counted, never fatal
+
+
+def test_corrupted_bytes_are_counted_and_skipped(vehicle: PtyVehicle) -> None:
+    hits = {"n": 0}
+
+    def flip(frame: bytes) -> bytes:
+        hits["n"] += 1
+        if hits["n"] % 4 or len(frame) < 12:
+            return frame
+        broken = bytearray(frame)
+        broken[9] ^= 0x10
+        return bytes(broken)
+
+    vehicle.corrupt = flip
+    with link_for(vehicle) as link:
+        link.start_stream()
+        got = samples(link, 30)
+        stats = link.stats()
+    assert all(m.acc is not None and (m.acc.x, m.acc.y, m.acc.z) == vehicle.state.acc
+               for m in got)
+    assert sum(stats.rejections.values()) > 0
+
+
+def test_ll_acknowledgements_are_timed_and_missing_ones_counted() -> None:
+    vehicle = PtyVehicle("asctec-ll")
+    try:
+        vehicle.drop_every_ack = 2  # every second command goes unacknowledged
+        with link_for(vehicle, command_rate_hz=50.0) as link:
+            link.start_stream()
+            t0 = time.monotonic()
+            for k in range(20):
+                link.send(CommandMsg(thrust=1000 + k, ctrl=0x08))
+                time.sleep(0.02)
+            time.sleep(0.1)
+            stats = link.stats()
+            elapsed = time.monotonic() - t0
+    finally:
+        vehicle.close()
+    assert stats.acks + stats.acks_missing == 20
+    assert stats.acks == 10 and stats.acks_missing == 10
+    # a 5-byte ack on a pty: well under a millisecond of line, and the responder's turn
+    assert all(0.0 < t < 0.01 for t in stats.ack_times)
+    # a missing acknowledgement costs the IMU polls no sample (100 Hz asked for)
+    assert stats.frames["imu_rawdata"] / elapsed > 90
+
+
+def test_ll_polls_take_turns_and_slow_status_rc() -> None:
+    """Half duplex: a poll goes out only after the last one's answers (or its timeout);
+    LL_STATUS and RC_DATA ride on every 20th and 10th poll."""
+    vehicle = PtyVehicle("asctec-ll")
+    try:
+        vehicle.sample_delay = 0.015  # slower than the 10 ms period: polls must wait
+        with link_for(vehicle) as link:
+            link.start_stream()
+            samples(link, 25)
+            stats = link.stats()
+        with vehicle._lock:
+            polls = list(vehicle.polls)
+    finally:
+        vehicle.close()
+    gaps = [b[0] - a[0] for a, b in itertools.pairwise(polls)]
+    assert min(gaps) >= 0.012  # never polled again before the answer came
+    masks = [m for _, m in polls]
+    assert masks[0] == PollMask.IMU_RAWDATA | PollMask.LL_STATUS | PollMask.RC_DATA
+    assert all(m & PollMask.IMU_RAWDATA for m in masks)
+    assert [i for i, m in enumerate(masks) if m & PollMask.RC_DATA][:3] == [0, 10, 20]
+    assert stats.polls_unanswered == 0
+
+
+def test_ll_repeated_values_are_a_repeated_sample() -> None:
+    """No counter in the LL dialect: identical values are the repeat (Algorithm 1)."""
+    vehicle = PtyVehicle("asctec-ll")
+    try:
+        vehicle.repeat_values = True
+        with link_for(vehicle) as link:
+            link.start_stream()
+            got = samples(link, 6)
+            stats = link.stats()
+    finally:
+        vehicle.close()
+    assert len({m.counter for m in got}) == 1
+    assert stats.counter_repeats >= 5
+
+
+def test_x3d_link_refuses_ll_imu_rawdata_that_passes_for_data() -> None:
+    """The spec's hazard: an LL IMU_RAWDATA with pressure 0x1Bxxxx decodes as X-3D DATA
+    of mask 0x1B; the X-3D link asked for another mask, drops it and counts it."""
+    vehicle = PtyVehicle("x3d")
+    try:
+        impostor = encode_frame(ImuRawData(0x1B0101, (1, 2, 3), (0, 0, 0), (4, 5, 6)))
+        assert isinstance(StreamDecoder().feed(impostor)[0], DataMsg)
+        with link_for(vehicle) as link:
+            link.start_stream()
+            samples(link, 2)
+            for _ in range(5):
+                vehicle.raw_frames.append(impostor)
+                time.sleep(0.015)
+            got = samples(link, 10)
+            stats = link.stats()
+    finally:
+        vehicle.close()
+    assert all(m.mask == 0x17 for m in got)
+    assert stats.unexpected_data == 5
+    assert not any(isinstance(x, RejectedFrame) for x in got)
+
+
+def test_poll_schedule_grid_and_ack_matching_without_io() -> None:
+    """The schedule alone, on made-up times: polls on a 10 ms grid (a late one does not
+    shift the grid or burst), status/RC on every 20th/10th, and an acknowledgement
+    answering the newest command owed."""
+    s = PollSchedule(0.01, status_every=20, rc_every=10, answer_timeout=0.02,
+                     ack_timeout=0.04)
+    assert s.poll_due(0.0) is None  # not started
+    s.start(1.0)
+    assert s.poll_due(1.0) == 0x000B
+    assert s.poll_due(1.005) is None  # answers owed, and not yet the next slot
+    for d in (0x01, 0x02, 0x15):
+        s.answered(d)
+    assert s.poll_due(1.0099) is None and s.poll_due(1.010) == 0x0002
+    s.answered(0x01)
+    assert s.poll_due(1.0351) == 0x0002  # late: the 1.02 and 1.03 slots are gone
+    assert s.next_deadline() == pytest.approx(1.0551)  # its answers are owed
+    s.answered(0x01)
+    assert s.next_deadline() == pytest.approx(1.04)
+    s.command_sent(1.036)
+    s.command_sent(1.0365)
+    s.acked(1.037)
+    assert s.acks == 1 and s.acks_missing == 1 and s.ack_times[-1] == pytest.approx(0.0005)
+    s.command_sent(1.038)
+    assert s.poll_due(1.041) is None  # its ack is owed: wait, at most half a period
+    assert s.poll_due(1.0449) is None and s.poll_due(1.045) == 0x0002
+    assert s.polls_unanswered == 0 and s.acks_missing == 1
+    s.poll_due(1.2)  # the last poll's answer never came: counted, and the ack expired
+    assert s.polls_unanswered == 1 and s.acks_missing == 2
+
+
+def test_ll_fallback_bounds_the_command_rate() -> None:
+    with pytest.raises(ConfigError, match=r"serial.*half the vehicle's 60 ms fallback"):
+        validate_config({"serial": {"protocol": "asctec-ll", "command_rate_hz": 20.0,
+                                    "ll": {"fallback_ms": 60}}})
+    ok = validate_config({"serial": {"protocol": "asctec-ll", "command_rate_hz": 20.0,
+                                     "ll": {"fallback_ms": 200}}})
+    assert ok.serial.ll.fallback_ms == 200
