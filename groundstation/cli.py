@@ -117,6 +117,8 @@ def fly(
     log_dir: Annotated[Path | None, typer.Option(help="Flight-log directory.")] = None,
     demo: Annotated[bool, typer.Option(
         help="Start the virtual lab (needs a `sim:` section) and fly it.")] = False,
+    protocol: Annotated[str | None, typer.Option(
+        help="The vehicle's serial dialect: x3d|asctec-ll (serial.protocol).")] = None,
 ) -> None:
     """Fly: preflight, take off, track the trajectory, land, hand back to the pilot.
 
@@ -137,7 +139,7 @@ def fly(
     """
     overrides: dict[str, Any] = {
         "serial.port": serial_port, "vicon.port": vicon_port, "vicon.object_name": vicon_object,
-        "controller.type": controller,
+        "controller.type": controller, "serial.protocol": protocol,
         "logging.flight_log_dir": str(log_dir) if log_dir else None,
     }
     if trajectory is not None and Path(trajectory).suffix.lower() == ".csv":
@@ -149,6 +151,30 @@ def fly(
     from groundstation.loop.flight import fly_command
 
     raise typer.Exit(fly_command(cfg, duration_s=duration, demo=demo, echo=typer.echo))
+
+
+@app.command()
+def motors(
+    action: Annotated[str, typer.Argument(help="start|stop")],
+    config: ConfigOption,
+    serial_port: Annotated[str | None, typer.Option(help="Serial device or URL.")] = None,
+    protocol: Annotated[str | None, typer.Option(
+        help="The vehicle's serial dialect (serial.protocol); the gesture is asctec-ll's.")
+    ] = None,
+) -> None:
+    """Start or stop the motors with the AscTec LL stick gesture, on this request only.
+
+    Refused while a flight holds the serial port or while the vehicle reports it is
+    flying; the gesture (thrust 0, yaw full one way, serial.ll.motor_gesture_s) is
+    followed by a hand-back (ctrl mask 0). Exit 0 when the vehicle reports the motors
+    in the state asked for, 1 when it does not or refused, 2 on a usage error.
+    """
+    if action not in ("start", "stop"):
+        raise _fail(f"motors: expected start or stop, got {action!r}", 2)
+    cfg = load(config, {"serial.port": serial_port, "serial.protocol": protocol})
+    from groundstation.loop.motors import motor_gesture_command
+
+    raise typer.Exit(motor_gesture_command(cfg, start=action == "start", echo=typer.echo))
 
 
 @app.command()

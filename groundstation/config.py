@@ -169,13 +169,15 @@ class LlConfig(ConfigModel):
     LL_STATUS and RC_DATA with every ``status_every``-th and ``rc_every``-th of those polls.
     """
 
-    status_every: int = Field(20, ge=1, le=1000)
-    # LL_STATUS (battery, serial switch, motors) at 5 Hz with 100 Hz IMU polls; design choice
+    status_every: int = Field(10, ge=1, le=1000)
+    # LL_STATUS (battery, serial switch, commands applied) at 10 Hz with 100 Hz IMU polls:
+    # 27 B each, 5 % of the line; slower delays the supervisor's "pilot took over"
     rc_every: int = Field(10, ge=1, le=1000)
     # RC_DATA (the pilot's sticks) at 10 Hz; design choice within the line budget
-    answer_timeout_ms: float = Field(20.0, gt=0, le=500.0)
-    # half-duplex turn: the next poll waits for the last one's answers at most this long
-    ack_timeout_ms: float = Field(40.0, gt=0, le=500.0)
+    answer_timeout_ms: float = Field(80.0, gt=0, le=500.0)
+    # a poll not answered completely by then is counted unanswered: above the round trip
+    # (57600 baud: 1 ms up, 7 ms down, the radio's latency: 30-40 ms in the virtual lab)
+    ack_timeout_ms: float = Field(80.0, gt=0, le=500.0)
     # a command whose 5-byte acknowledgement has not arrived by then is counted missing
     fallback_ms: float = Field(100.0, ge=20.0, le=1000.0)
     # the LL firmware's fallback after the last command: undocumented; AscTec's later SDK

@@ -2,6 +2,8 @@
 
 * :class:`VirtualLab`: plant, firmware, radio and Vicon on a simulated clock,
   exchanging bytes (or messages) in-process: deterministic, faster than real time.
+  The vehicle speaks the configuration's ``serial.protocol``: the X-3D dialect
+  (:mod:`sim_device.firmware`) or the AscTec LL dialect (:mod:`sim_device.ll_firmware`).
 * :func:`run_sim_device`: the same lab in real time on a pseudo-terminal and UDP
   (``gs sim-device``); :class:`SimDeviceThread` runs it in a background thread,
   :class:`SimDeviceProcess` in a child process; :class:`WireRecord` is what the vehicle

@@ -24,14 +24,19 @@ def sim_device(
     json: Annotated[bool, typer.Option(
         "--json", help="Print where the lab is as one JSON line first (for programs: "
                        "serial_port, vicon_target, truth_file).")] = False,
+    protocol: Annotated[str | None, typer.Option(
+        help="The vehicle's serial dialect: x3d|asctec-ll (overrides serial.protocol).")]
+        = None,
 ) -> None:
     """Run the virtual X-3D (pty) and virtual Vicon (UDP) in real time until Ctrl-C.
 
     Prints the pty path to use as ``--serial-port`` and the Vicon UDP target, and
     writes the ground truth on exit (also on SIGINT/SIGTERM). With ``--json`` the first
-    line is the same as JSON (``groundstation.lab.Announcement``).
+    line is the same as JSON (``groundstation.lab.Announcement``). With ``--protocol
+    asctec-ll`` the vehicle speaks the AscTec LL dialect (answers polls, acknowledges
+    commands; ``serial.ll`` of the configuration).
     """
-    cfg = load(config)
+    cfg = load(config, {"serial.protocol": protocol})
     from sim_device.realtime import run_sim_device
 
     run_sim_device(cfg, truth_file=truth_file, duration=duration, announce=typer.echo,

@@ -21,9 +21,14 @@ codec (:mod:`groundstation.asctec`) reads and writes:
 Applied sticks become plant set points: ``omega = K * (roll, pitch, yaw)``
 (eq. 3.22) and ``lift = thrust_scale * F_lift(thrust)`` (eq. 3.7); thrust 0 stops
 the motors.
+
+The command store, watchdog, arbitration and plant inputs are :class:`FirmwareCore`,
+which the AscTec LL dialect's firmware (:mod:`sim_device.ll_firmware`) shares.
 """
 
 from __future__ import annotations
+
+from typing import ClassVar
 
 from groundstation.asctec.blocks import AxisCounts, RcBlock, StatusBlock
 from groundstation.asctec.decoder import StreamDecoder, encode_frame
@@ -50,12 +55,17 @@ def _clamp(value: int, lo: int, hi: int) -> int:
     return lo if value < lo else hi if value > hi else value
 
 
-class Firmware:
-    """Vehicle firmware: protocol handling, watchdog, channel arbitration, DATA stream.
+class FirmwareCore:
+    """What every dialect's vehicle firmware shares: the last valid command, the watchdog,
+    the per-channel arbitration (command vs pilot) and the plant's inputs.
 
     link : link/firmware parameters; plant, imu, pilot : the simulated hardware;
-    downlink : the UART and radio towards the ground station.
+    downlink : the UART and radio towards the ground station. A dialect adds
+    ``receive(t_ns, data)``, ``sample(t_ns)`` and a ``decoder`` with ``counts()``.
     """
+
+    THRUST_MAX: ClassVar[int] = 4096
+    """Largest applied thrust [RC units] (the X-3D's COMMAND range)."""
 
     def __init__(self, link: LinkParams, plant: Plant, imu: ImuModel, pilot: Pilot,
                  downlink: Downlink) -> None:
@@ -64,16 +74,12 @@ class Firmware:
         self.imu = imu
         self.pilot = pilot
         self.downlink = downlink
-        self.decoder = StreamDecoder(link.crc_profile)
         self._profile = link.crc_profile
         self._watchdog_ns = seconds_to_ns(link.watchdog)
         self.command: CommandMsg | None = None
         self.last_command_ns: int | None = None
-        self.sensor_mask = 0
-        self.period_ns = 0
-        self.next_sample_ns: int | None = None
-        self.counter = 0
-        self.stalls: list[tuple[int, int]] = []  # (start, end) [ns] without DATA
+        self.next_sample_ns: int | None = None  # next pushed sample [ns]; None = none due
+        self.stalls: list[tuple[int, int]] = []  # (start, end) [ns] without data
         self.applied = Sticks()
         self.applied_mask = 0
         self._expiry_ns = 0  # next time the arbitration must be redone [ns]
@@ -87,30 +93,16 @@ class Firmware:
         self.handbacks = 0
         plant.set_inputs(0.0, 0.0, 0.0, 0.0)
 
-    # ------------------------------------------------------------------ ground -> vehicle
-    def receive(self, t_ns: int, data: bytes) -> None:
-        """Bytes that reached the vehicle at ``t_ns``: decode and act on complete frames."""
-        for item in self.decoder.feed(data):
-            if isinstance(item, CommandMsg):
-                self.command = item
-                self.last_command_ns = t_ns
-                self.commands += 1
-                self._expiry_ns = t_ns  # re-arbitrate at this step
-            elif isinstance(item, ConfigMsg):
-                self._configure(t_ns, item)
-            else:  # a DATA frame or a rejected candidate: counted, otherwise ignored
-                self.uplink_ignored += 1
+    def _command(self, t_ns: int, cmd: CommandMsg) -> None:
+        """A valid command arrived at ``t_ns`` [ns]: store it, feed the watchdog."""
+        self.command = cmd
+        self.last_command_ns = t_ns
+        self.commands += 1
+        self._expiry_ns = t_ns  # re-arbitrate at this step
 
-    def _configure(self, t_ns: int, msg: ConfigMsg) -> None:
-        self.configs += 1
-        self.sensor_mask = msg.sensor_mask
-        if msg.period_ms == 0:
-            self.period_ns = 0
-            self.next_sample_ns = None
-            return
-        self.period_ns = msg.period_ms * 1_000_000
-        if self.next_sample_ns is None:
-            self.next_sample_ns = t_ns
+    def stalled(self, t_ns: int) -> bool:
+        """``t_ns`` [ns] falls in a configured stall (the vehicle sends no data)."""
+        return any(begin <= t_ns < end for begin, end in self.stalls)
 
     # ------------------------------------------------------------------ control
     def serial_alive(self, t_ns: int) -> bool:
@@ -163,10 +155,53 @@ class Firmware:
         roll = _clamp(sticks.roll, -2048, 2047)
         pitch = _clamp(sticks.pitch, -2048, 2047)
         yaw = _clamp(sticks.yaw, -2048, 2047)
-        thrust = _clamp(sticks.thrust, 0, 4096)
+        thrust = _clamp(sticks.thrust, 0, self.THRUST_MAX)
         self.applied = Sticks(roll=roll, pitch=pitch, yaw=yaw, thrust=thrust)
         kx, ky, kz = self.plant.params.k_rate
         self.plant.set_inputs(kx * roll, ky * pitch, kz * yaw, self.plant.lift_command(thrust))
+
+    def _battery_mv(self) -> int:
+        """The battery voltage now [mV]: full voltage drooping with the lift."""
+        return min(0xFFFF, round(self.params.battery_mv * self.plant.battery_factor()))
+
+
+class Firmware(FirmwareCore):
+    """The X-3D dialect's firmware: CONFIG, COMMAND and the pushed DATA stream
+    (see the module docstring).
+
+    link : link/firmware parameters; plant, imu, pilot : the simulated hardware;
+    downlink : the UART and radio towards the ground station.
+    """
+
+    def __init__(self, link: LinkParams, plant: Plant, imu: ImuModel, pilot: Pilot,
+                 downlink: Downlink) -> None:
+        self.decoder = StreamDecoder(link.crc_profile)
+        super().__init__(link, plant, imu, pilot, downlink)
+        self.sensor_mask = 0
+        self.period_ns = 0
+        self.counter = 0
+
+    # ------------------------------------------------------------------ ground -> vehicle
+    def receive(self, t_ns: int, data: bytes) -> None:
+        """Bytes that reached the vehicle at ``t_ns``: decode and act on complete frames."""
+        for item in self.decoder.feed(data):
+            if isinstance(item, CommandMsg):
+                self._command(t_ns, item)
+            elif isinstance(item, ConfigMsg):
+                self._configure(t_ns, item)
+            else:  # a DATA frame or a rejected candidate: counted, otherwise ignored
+                self.uplink_ignored += 1
+
+    def _configure(self, t_ns: int, msg: ConfigMsg) -> None:
+        self.configs += 1
+        self.sensor_mask = msg.sensor_mask
+        if msg.period_ms == 0:
+            self.period_ns = 0
+            self.next_sample_ns = None
+            return
+        self.period_ns = msg.period_ms * 1_000_000
+        if self.next_sample_ns is None:
+            self.next_sample_ns = t_ns
 
     # ------------------------------------------------------------------ vehicle -> ground
     def sample(self, t_ns: int) -> None:
@@ -205,9 +240,6 @@ class Firmware:
                          _clamp(s.yaw, -2048, 2047), _clamp(s.thrust, 0, 4096),
                          SWITCH_ON if self.pilot.serial_enable else SWITCH_OFF)
         return DataMsg(self.counter, status, gyro, acc, pressure, rc)
-
-    def _battery_mv(self) -> int:
-        return min(0xFFFF, round(self.params.battery_mv * self.plant.battery_factor()))
 
     def _flags(self) -> int:
         flags = FLAG_SERIAL_ACTIVE if self.applied_mask else 0

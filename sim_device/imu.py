@@ -3,7 +3,7 @@
 Measurement model per axis (FRD body axes)::
 
     si_measured = clip((1 + e) * (truth + bias + noise), -saturation, +saturation)
-    count       = clip(round(si_measured / K + zero), 0, 4095)
+    count       = clip(round(si_measured / K + zero), *count_range)
 
 * ``truth``: body rates [rad/s] for the gyro; specific force [m/s^2] (non-
   gravitational force / m, about (0, 0, -9.82) at rest) for the accelerometer.
@@ -13,7 +13,8 @@ Measurement model per axis (FRD body axes)::
 * ``e``: a constant per-axis scale error drawn once (seeded) in +/- ``scale_error``;
   ``bias``: constant; ``noise``: white Gaussian with the Table 6.3 variances.
 * the accelerometer saturates physically near +/-14 m/s^2 (Ch. 6.2) before the
-  12-bit ADC clips.
+  ADC clips: ``count_range`` is the X-3D's 12 bits (0, 4095) or the AscTec LL
+  dialect's int16 (-32768, 32767).
 
 Noise is drawn in blocks (one generator call per 512 samples) to keep a sample cheap.
 """
@@ -50,8 +51,8 @@ class ImuModel:
         e = params.scale_error
         self.gyro_scale_true = tuple(float(x) for x in 1.0 + rng.uniform(-e, e, 3))
         self.acc_scale_true = tuple(float(x) for x in 1.0 + rng.uniform(-e, e, 3))
-        self._gyro = AxisScaling(params.gyro_scale, params.gyro_zero)
-        self._acc = AxisScaling(params.acc_scale, params.acc_zero)
+        self._gyro = AxisScaling(params.gyro_scale, params.gyro_zero, params.count_range)
+        self._acc = AxisScaling(params.acc_scale, params.acc_zero, params.count_range)
         self._sigma = np.sqrt(np.array(params.gyro_variance + params.acc_variance, dtype=float))
         self._noise = np.empty((0, 6))
         self._next = 0
@@ -79,7 +80,7 @@ class ImuModel:
     def sample(
         self, omega: tuple[float, float, float], specific_force: tuple[float, float, float]
     ) -> tuple[tuple[int, int, int], tuple[int, int, int]]:
-        """Raw 12-bit (gyro, acc) counts for true body rates [rad/s] and specific force [m/s^2]."""
+        """Raw (gyro, acc) counts for true body rates [rad/s] and specific force [m/s^2]."""
         si = self.measure_si(omega, specific_force)
         return self._gyro.to_counts_int(si[:3]), self._acc.to_counts_int(si[3:])
 

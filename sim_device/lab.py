@@ -23,6 +23,16 @@ Example::
     for d in lab.vicon_datagrams():             # UDP payloads delivered so far
         ...
     lab.truth.position                          # the true NED position [m]
+
+With ``serial.protocol: asctec-ll`` (``LinkParams.protocol``) the vehicle speaks the
+AscTec LL dialect (:class:`sim_device.ll_firmware.LlFirmware`): it sends only what is
+polled, and acknowledges each command::
+
+    lab = VirtualLab(apply_overrides(cfg, {"serial.protocol": "asctec-ll"}))
+    lab.poll(PollMask.IMU_RAWDATA | PollMask.LL_STATUS)
+    lab.send(CommandMsg(thrust=2100, ctrl=0x0F))     # sent as ``>*>di`` + payload
+    for t, packet in lab.advance_packets(0.05):      # LlStatus, ImuRawData, ..., Ack
+        ...
 """
 
 from __future__ import annotations
@@ -33,12 +43,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from groundstation.asctec.decoder import StreamDecoder, encode_frame
-from groundstation.asctec.messages import DataMsg, Message
+from groundstation.asctec.decoder import Ack, RejectedFrame, StreamDecoder, encode_frame
+from groundstation.asctec.ll import LlDecoder, LlMessage, encode_command, encode_poll
+from groundstation.asctec.messages import CommandMsg, DataMsg, Message
 from groundstation.types import Sticks
 from sim_device.firmware import Firmware
 from sim_device.imu import ImuModel
 from sim_device.link import ByteCorrupter, Downlink, Uplink, seconds_to_ns
+from sim_device.ll_firmware import LlFirmware
 from sim_device.params import LabParams, LossEncoding
 from sim_device.pilot import Pilot, StickScript
 from sim_device.plant import Plant
@@ -52,14 +64,17 @@ if TYPE_CHECKING:
 class LabStats:
     """Counters of one lab run (for tests, benchmarks and the real-time summary).
 
-    data_sent : DATA frames put on the wire; data_dropped : of those, lost by the radio
-    samples_busy : DATA samples skipped because the UART was still busy (baud limit)
-    samples_stalled : DATA samples not taken during a stall
+    data_sent : DATA frames put on the wire (LL dialect: answers and acknowledgements);
+        data_dropped : of those, lost by the radio
+    samples_busy : DATA samples skipped because the UART was still busy (baud limit; LL:
+        answers that did not fit the transmit buffer)
+    samples_stalled : DATA samples not taken during a stall (LL: polls not answered)
     bits_flipped : corrupted bytes, both directions
-    commands, configs : valid COMMAND / CONFIG frames the vehicle accepted
+    commands, configs : valid COMMAND / CONFIG frames the vehicle accepted (LL: configs 0)
     uplink_rejected : rejected frame candidates on the uplink, by reason
     handbacks : times the applied ctrl mask fell to 0 (watchdog, switch or a mask-0 COMMAND)
     vicon_sent, vicon_lost : datagrams sent, and of those without a tracked pose
+    polls : LL dialect: polls the vehicle received (X-3D: 0)
     """
 
     t: float
@@ -74,10 +89,12 @@ class LabStats:
     handbacks: int
     vicon_sent: int
     vicon_lost: int
+    polls: int = 0
 
 
 class VirtualLab:
-    """The virtual X-3D and virtual Vicon on a simulated clock (see the module docstring).
+    """The virtual X-3D (X-3D or AscTec LL dialect) and virtual Vicon on a simulated clock
+    (see the module docstring).
 
     params : :class:`LabParams`, a :class:`~groundstation.config.GroundStationConfig`
         (its ``sim`` section and the vehicle model), or None for the defaults
@@ -104,13 +121,15 @@ class VirtualLab:
         self.uplink = Uplink(params.link.baud, seconds_to_ns(params.link.command_delay),
                              self._corrupt_up)
         self.downlink = Downlink(params.link.baud, self._corrupt_down, rng_drop)
-        self.firmware = Firmware(params.link, self.plant, ImuModel(params.imu, rng_imu),
-                                 self.pilot, self.downlink)
+        firmware = LlFirmware if params.link.protocol == "asctec-ll" else Firmware
+        self.firmware: Firmware | LlFirmware = firmware(
+            params.link, self.plant, ImuModel(params.imu, rng_imu), self.pilot, self.downlink)
         self.vicon = VirtualVicon(params.vicon, rng_vicon)
         self.truth_log = TruthLog()
         self._truth_ns = seconds_to_ns(params.truth_period)
         self._next_truth_ns = 0
         self._ground_decoder = StreamDecoder(params.link.crc_profile)
+        self._ll_decoder = LlDecoder(params.link.crc_profile)
         self._vicon_out: list[ViconDatagram] = []
         self.set_faults(drop_rate=params.faults.drop_rate, data_delay=params.faults.data_delay,
                         burst_delay_s=params.faults.burst_delay_s)
@@ -145,15 +164,40 @@ class VirtualLab:
         self._vicon_out.extend(self.vicon.pop_due(goal))
         return [(t_ns * 1e-9, data) for t_ns, data in self.downlink.pop_due(goal)]
 
+    @property
+    def protocol(self) -> str:
+        """The dialect the vehicle speaks: "x3d" or "asctec-ll"."""
+        return self.params.link.protocol
+
     def advance_messages(self, dt: float) -> list[tuple[float, DataMsg]]:
         """Like :meth:`advance` but decoded with the project's decoder: (time [s], DataMsg).
 
-        Corrupted frames are rejected by the decoder and simply missing here.
+        Corrupted frames are rejected by the decoder and simply missing here. X-3D dialect
+        only (an LL vehicle's packets are :meth:`advance_packets`).
         """
+        self._require_protocol("x3d", "advance_messages", "advance_packets")
         out: list[tuple[float, DataMsg]] = []
         for t, data in self.advance(dt):
             out.extend((t, m) for m in self._ground_decoder.feed(data) if isinstance(m, DataMsg))
         return out
+
+    def advance_packets(self, dt: float) -> list[tuple[float, LlMessage | Ack]]:
+        """Like :meth:`advance` but decoded with the LL dialect's host decoder
+        (:class:`~groundstation.asctec.ll.LlDecoder`): (time [s], packet or Ack).
+
+        AscTec LL dialect only; corrupted frames are rejected and simply missing here.
+        """
+        self._require_protocol("asctec-ll", "advance_packets", "advance_messages")
+        out: list[tuple[float, LlMessage | Ack]] = []
+        for t, data in self.advance(dt):
+            out.extend((t, m) for m in self._ll_decoder.feed(data)
+                       if not isinstance(m, RejectedFrame))
+        return out
+
+    def _require_protocol(self, protocol: str, method: str, other: str) -> None:
+        if self.protocol != protocol:
+            raise RuntimeError(f"{method}: the virtual vehicle speaks {self.protocol}, "
+                               f"not {protocol} (serial.protocol); use {other}")
 
     def _run(self, goal_ns: int) -> None:
         """Step the plant until its time reaches ``goal_ns``, handling events at each boundary."""
@@ -184,8 +228,21 @@ class VirtualLab:
         self.uplink.write(self._goal_ns, data)
 
     def send(self, msg: Message) -> None:
-        """Encode ``msg`` with the project's codec and :meth:`write` it."""
-        self.write(encode_frame(msg, self.params.link.crc_profile))
+        """Encode ``msg`` with the project's codec and :meth:`write` it.
+
+        In the AscTec LL dialect a COMMAND goes out as ``>*>di`` + its payload
+        (:func:`~groundstation.asctec.ll.encode_command`); any other message is framed as
+        in the X-3D dialect (the LL vehicle ignores it).
+        """
+        if self.protocol == "asctec-ll" and isinstance(msg, CommandMsg):
+            self.write(encode_command(msg))
+        else:
+            self.write(encode_frame(msg, self.params.link.crc_profile))
+
+    def poll(self, mask: int) -> None:
+        """Write an LL poll ``>*>p`` + ``mask`` (:class:`~groundstation.asctec.ll.PollMask`
+        bits); an X-3D vehicle ignores it."""
+        self.write(encode_poll(mask))
 
     def vicon_datagrams(self) -> list[ViconDatagram]:
         """Vicon datagrams delivered since the last call, in order."""
@@ -238,7 +295,8 @@ class VirtualLab:
         self.pilot.script = script
 
     def stall_data(self, duration: float, start: float | None = None) -> None:
-        """Stop the DATA stream for ``duration`` [s] from ``start`` (default: now)."""
+        """Stop the DATA stream for ``duration`` [s] from ``start`` (default: now); an LL
+        vehicle answers no poll meanwhile (it still applies and acknowledges commands)."""
         begin = self._goal_ns if start is None else seconds_to_ns(start)
         self.firmware.stalls.append((begin, begin + seconds_to_ns(duration)))
 
@@ -292,4 +350,5 @@ class VirtualLab:
             commands=fw.commands, configs=fw.configs,
             uplink_rejected={k: v for k, v in fw.decoder.counts().rejections.items() if v},
             handbacks=fw.handbacks, vicon_sent=self.vicon.sent, vicon_lost=self.vicon.lost,
+            polls=fw.polls if isinstance(fw, LlFirmware) else 0,
         )

@@ -138,8 +138,13 @@ class Downlink:
         """The UART is still sending an earlier frame at ``t_ns``."""
         return self._free_ns > t_ns
 
+    def backlog_ns(self, t_ns: int) -> int:
+        """Time the UART still needs at ``t_ns`` for the bytes queued before [ns] (0 = idle)."""
+        return max(0, self._free_ns - t_ns)
+
     def send(self, t_ns: int, frame: bytes) -> None:
-        """Start sending ``frame`` at ``t_ns`` (the caller checked :meth:`busy`)."""
+        """Start sending ``frame`` at ``t_ns``, or right after the frames queued before it
+        (the X-3D firmware checks :meth:`busy` first and sends one frame at a time)."""
         end = max(t_ns, self._free_ns) + self.frame_ns(len(frame))
         self._free_ns = end
         self.frames_sent += 1

@@ -19,6 +19,9 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import numpy.typing as npt
 
+from groundstation.asctec.decoder import FRAME_OVERHEAD
+from groundstation.asctec.ll import LL_MESSAGE_TYPES
+from groundstation.config import LlConfig
 from groundstation.errors import ConfigError
 from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.model.sensors import (
@@ -38,10 +41,22 @@ if TYPE_CHECKING:
 Vec3 = tuple[float, float, float]
 LossEncoding = Literal["missing", "zero", "held-identity"]
 LOSS_ENCODINGS: tuple[LossEncoding, ...] = ("missing", "zero", "held-identity")
+Dialect = Literal["x3d", "asctec-ll"]
+"""The serial dialect the virtual vehicle speaks (``serial.protocol``)."""
+DIALECTS: tuple[Dialect, ...] = ("x3d", "asctec-ll")
+X3D_COUNT_RANGE = (0, 4095)
+"""The X-3D DATA stream's 12-bit ADC counts (spec 3.3)."""
+LL_COUNT_RANGE = (-32768, 32767)
+"""The AscTec LL IMU_RAWDATA's int16 counts."""
+LL_MAX_FRAME = max(max(c.PAYLOAD_SIZES) for c in LL_MESSAGE_TYPES.values()) + FRAME_OVERHEAD
+"""The largest LL packet on the wire [bytes] (IMU_CALCDATA, 103)."""
 
 _VEHICLE = QuadrotorParams()
 """The vehicle model's defaults (groundstation.model.quadrotor): the design model."""
 
+
+_LL = LlConfig()
+"""The ``serial.ll`` section's defaults (the LL dialect's link schedule)."""
 
 _SIM = SimConfig()
 """The ``sim:`` section's defaults (:mod:`sim_device.config`): the one place the lab's
@@ -131,8 +146,10 @@ class ImuParams:
     scale_error : each axis's true scale differs from nominal by a factor drawn
         uniformly in [1 - e, 1 + e] (seeded)
     acc_saturation : the physical accelerometer clips at +/- this [m/s^2] (Ch. 6.2)
-    gyro_saturation : physical gyro range [rad/s]; None = only the 12-bit ADC clips
+    gyro_saturation : physical gyro range [rad/s]; None = only the ADC clips
     pressure_noise : standard deviation of the raw pressure reading [Pa]
+    count_range : (min, max) the ADC's counts clip to: the X-3D's 12 bits (0, 4095) or
+        the AscTec LL dialect's int16 (-32768, 32767) [counts]
     """
 
     gyro_scale: Vec3 = K_GYRO_TABLE_6_2
@@ -147,8 +164,11 @@ class ImuParams:
     acc_saturation: float = ACC_SATURATION_M_S2
     gyro_saturation: float | None = None
     pressure_noise: float = 2.0
+    count_range: tuple[int, int] = X3D_COUNT_RANGE
 
     def __post_init__(self) -> None:
+        lo, hi = self.count_range
+        _require(lo < hi, "imu.count_range", self.count_range, "(min, max) with min < max")
         for name in ("gyro_scale", "acc_scale"):
             v = getattr(self, name)
             _require(len(v) == 3 and all(x != 0 for x in v) and _finite(*v), f"imu.{name}", v,
@@ -168,7 +188,19 @@ class LinkParams:
     crc_profile : spec section 2 CRC profile name
     command_delay : transport delay of the ground -> vehicle link [s] (radio, firmware)
     watchdog : no valid COMMAND for this long hands every channel to the pilot [s]
+        (X-3D: the spec's 100 ms; LL: ``serial.ll.fallback_ms``)
     battery_mv : STATUS battery voltage with a full battery [mV]; droops with the lift
+    protocol : the dialect the vehicle speaks: "x3d" (:mod:`sim_device.firmware`) or
+        "asctec-ll" (:mod:`sim_device.ll_firmware`)
+    rc_channels : LL RC_DATA channels_out indices of pitch, roll, thrust, yaw
+        (``serial.ll.rc_channels``)
+    rc_switch_channel : LL RC_DATA channel of the pilot's serial-enable switch (AscTec's
+        channel 5, index 4; unverified)
+    tx_buffer : LL firmware's transmit buffer [bytes]: a poll's answer that does not fit
+        behind the bytes still queued is not sent (unknown on the vehicle; 512 B holds
+        every packet of one poll twice over)
+    motor_start_yaw, motor_gesture : LL motor gesture: thrust 0 with the yaw at this value
+        (the opposite stops) held this long [s] starts the motors (``serial.ll``)
     """
 
     baud: int = 57600
@@ -176,11 +208,26 @@ class LinkParams:
     command_delay: float = 0.02
     watchdog: float = 0.100
     battery_mv: int = _SIM.battery_mv
+    protocol: Dialect = "x3d"
+    rc_channels: tuple[int, int, int, int] = _LL.rc_channels
+    rc_switch_channel: int = 4
+    tx_buffer: int = 512
+    motor_start_yaw: int = _LL.motor_start_yaw
+    motor_gesture: float = 0.4
 
     def __post_init__(self) -> None:
         _require(self.baud > 0, "link.baud", self.baud, "must be > 0")
         _require(self.command_delay >= 0 and self.watchdog > 0, "link.command_delay/watchdog",
                  (self.command_delay, self.watchdog), "delay >= 0, watchdog > 0")
+        _require(self.protocol in DIALECTS, "link.protocol", self.protocol,
+                 f"one of {DIALECTS}")
+        channels = (*self.rc_channels, self.rc_switch_channel)
+        _require(len(self.rc_channels) == 4 and len(set(channels)) == 5
+                 and all(0 <= c <= 7 for c in channels), "link.rc_channels",
+                 (self.rc_channels, self.rc_switch_channel),
+                 "four distinct RC_DATA channels 0..7 besides the serial-enable switch's")
+        _require(self.tx_buffer >= LL_MAX_FRAME, "link.tx_buffer", self.tx_buffer,
+                 f"at least the largest LL packet ({LL_MAX_FRAME} bytes)")
 
 
 @dataclass(frozen=True, slots=True)
@@ -300,13 +347,20 @@ class LabParams:
     def __post_init__(self) -> None:
         _require(0 < self.dt <= 0.01, "dt", self.dt, "in (0, 0.01] s")
         _require(self.truth_period > 0, "truth_period", self.truth_period, "must be > 0")
+        lo, hi = LL_COUNT_RANGE if self.link.protocol == "asctec-ll" else X3D_COUNT_RANGE
+        _require(lo <= self.imu.count_range[0] and self.imu.count_range[1] <= hi,
+                 "imu.count_range", self.imu.count_range,
+                 f"within the {self.link.protocol} dialect's ({lo}, {hi})")
 
     @classmethod
     def from_config(cls, config: GroundStationConfig) -> LabParams:
         """Parameters from a validated configuration (``sim`` may be absent: defaults).
 
         Fields without a configuration key keep their defaults:
-        imu.gyro_saturation/pressure_noise and link.watchdog (the spec's 100 ms).
+        imu.gyro_saturation/pressure_noise, link.rc_switch_channel/tx_buffer and, for the
+        X-3D dialect, link.watchdog (the spec's 100 ms). With ``serial.protocol:
+        asctec-ll`` the watchdog is ``serial.ll.fallback_ms``, the RC_DATA channels
+        ``serial.ll.rc_channels`` and the IMU counts int16.
         """
         from sim_device.config import sim_section
 
@@ -315,11 +369,7 @@ class LabParams:
         return cls(
             dt=sim.dt_s, seed=sim.seed, plant=_plant_params(config, sim),
             imu=_imu_params(config, sim), vicon=_vicon_params(config, sim),
-            link=LinkParams(baud=config.serial.baud, crc_profile=config.serial.crc_profile,
-                            command_delay=(config.vehicle.command_delay_s
-                                           if sim.command_delay_s is None
-                                           else sim.command_delay_s),
-                            battery_mv=sim.battery_mv),
+            link=_link_params(config, sim),
             faults=FaultParams(corruption_rate=f.corruption_rate, drop_rate=f.drop_rate,
                                stall_at=f.stall_at_s, stall_duration=f.stall_duration_s,
                                burst_delay_s=f.burst_delay_s, data_delay=f.delay_s),
@@ -342,14 +392,29 @@ def _plant_params(config: GroundStationConfig, sim: SimConfig) -> PlantParams:
     )
 
 
+def _link_params(config: GroundStationConfig, sim: SimConfig) -> LinkParams:
+    serial = config.serial
+    delay = config.vehicle.command_delay_s if sim.command_delay_s is None else sim.command_delay_s
+    if serial.protocol == "asctec-ll":
+        ll = serial.ll
+        return LinkParams(baud=serial.baud, crc_profile=serial.crc_profile,
+                          command_delay=delay, battery_mv=sim.battery_mv,
+                          protocol="asctec-ll", watchdog=ll.fallback_ms / 1000.0,
+                          rc_channels=ll.rc_channels, motor_start_yaw=ll.motor_start_yaw)
+    return LinkParams(baud=serial.baud, crc_profile=serial.crc_profile, command_delay=delay,
+                      battery_mv=sim.battery_mv)
+
+
 def _imu_params(config: GroundStationConfig, sim: SimConfig) -> ImuParams:
     veh = config.vehicle
+    ll = config.serial.protocol == "asctec-ll"
     return ImuParams(
         gyro_scale=_vec3(veh.gyro_scale), acc_scale=_vec3(veh.acc_scale),
         gyro_zero=_vec3(veh.gyro_zero), acc_zero=_vec3(veh.acc_zero),
         gyro_variance=_vec3(veh.gyro_variance), acc_variance=_vec3(veh.acc_variance),
         gyro_bias=_vec3(sim.gyro_bias), acc_bias=_vec3(sim.acc_bias),
         scale_error=sim.scale_error, acc_saturation=veh.acc_saturation,
+        count_range=LL_COUNT_RANGE if ll else X3D_COUNT_RANGE,
     )
 
 

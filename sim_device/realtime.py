@@ -19,6 +19,9 @@ and the real-time modes share one plant, one firmware and one Vicon.
   and each COMMAND frame is read from it are stamped on the monotonic clock
   (:mod:`sim_device.wire`): the ground station's DATA -> COMMAND latency and its
   COMMAND gaps as the vehicle sees them.
+* **Dialect.** ``serial.protocol`` (``gs sim-device --protocol``) picks the vehicle's
+  dialect: the X-3D's pushes DATA once CONFIGured; the AscTec LL's answers each poll
+  written to the pty and acknowledges each command, and sends nothing unpolled.
 * **Unplug.** Setting ``unplug`` closes the pty (a serial adapter pulled out); the
   plant and the Vicon run on, and the vehicle's watchdog hands back to the pilot.
 * **Stop.** When ``stop`` is set, after ``duration``, or on SIGINT/SIGTERM (handlers
@@ -77,11 +80,13 @@ class SimDeviceInfo:
     pty_path : the serial port for the ground station (pty slave path)
     vicon_target : (address, port) the Vicon datagrams are sent to
     truth_file : where the ground truth will be written on exit (.npz)
+    protocol : the dialect the vehicle speaks ("x3d" or "asctec-ll")
     """
 
     pty_path: str
     vicon_target: tuple[str, int]
     truth_file: Path
+    protocol: str = "x3d"
 
     @property
     def announcement(self) -> Announcement:
@@ -195,8 +200,9 @@ def run_sim_device(
 ) -> SimDeviceResult:
     """Run the virtual X-3D (pty) and virtual Vicon (UDP) in real time until stopped.
 
-    config : the whole configuration (``sim`` section, vehicle model, ``serial.baud``
-        and ``crc_profile``, ``vicon.port`` and ``object_name``; ``sim`` None = defaults)
+    config : the whole configuration (``sim`` section, vehicle model, ``serial.baud``,
+        ``crc_profile`` and ``protocol`` (with ``serial.ll``), ``vicon.port`` and
+        ``object_name``; ``sim`` None = defaults)
     stop : set it to stop (from another thread); SIGINT/SIGTERM also stop the run
         when it runs in the main thread
     truth_file : ground-truth path (.npz); default :func:`default_truth_path`
@@ -218,14 +224,15 @@ def run_sim_device(
     pty = _Pty()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     counters = {"overruns": 0, "vicon_errors": 0}
-    wire = WireTiming(lab.params.link.crc_profile)
+    wire = WireTiming(lab.params.link.crc_profile, lab.protocol)
     wall0, cpu0 = time.monotonic(), time.process_time()
     start = wall0  # simulated time 0 on the monotonic clock; reset when the clock starts
     try:
-        info = SimDeviceInfo(pty.path, target, info_path.with_suffix(".npz"))
+        info = SimDeviceInfo(pty.path, target, info_path.with_suffix(".npz"), lab.protocol)
         if on_ready is not None:
             on_ready(info)
-        say(f"virtual X-3D on {pty.path} ({lab.params.link.baud} baud); "
+        dialect = ", AscTec LL dialect: answers polls" if lab.protocol == "asctec-ll" else ""
+        say(f"virtual X-3D on {pty.path} ({lab.params.link.baud} baud{dialect}); "
             f"virtual Vicon -> udp://{target[0]}:{target[1]} at {lab.params.vicon.rate_hz:g} Hz")
         with on_stop_signals(lambda _sig: stop.set()), \
                 fifo_priority(sim.fifo_priority, who="virtual vehicle"):
@@ -286,7 +293,7 @@ def _loop(lab: VirtualLab, io: _Io, stop: threading.Event, tick: float,
         for _, frame in lab.advance_to(now):
             if not pty.closed:
                 pty.write(frame)
-                wire.data_sent(time.monotonic())
+                wire.frame_sent(time.monotonic(), frame)
         for dgram in lab.vicon_datagrams():
             try:
                 io.sock.sendto(dgram.data, io.target)
@@ -384,11 +391,14 @@ class SimDeviceProcess:
     truth_file : where the child writes the ground truth (.npz)
     gs : the ``gs`` executable (default: next to this interpreter, else this
         interpreter running the CLI)
+    protocol : the vehicle's dialect ("x3d" or "asctec-ll", ``--protocol``); None = the
+        configuration's ``serial.protocol``
     """
 
     def __init__(self, config_file: str | Path, truth_file: str | Path, *,
                  gs: str | Path | None = None, timeout: float = 30.0,
-                 duration: float | None = None, stderr: Path | None = None) -> None:
+                 duration: float | None = None, stderr: Path | None = None,
+                 protocol: str | None = None) -> None:
         exe = Path(gs) if gs is not None else Path(sys.executable).parent / "gs"
         command = [str(exe)] if exe.exists() else [
             sys.executable, "-c", "from groundstation.cli import main; main()"]
@@ -399,6 +409,8 @@ class SimDeviceProcess:
                       "--truth-file", str(self.truth_file)]
         if duration is not None:  # bounds the child should this process die without stopping it
             self._args += ["--duration", f"{duration:g}"]
+        if protocol is not None:
+            self._args += ["--protocol", protocol]
         self._child: subprocess.Popen[str] | None = None
         self._announcement: Announcement | None = None
         self.pty_path = ""

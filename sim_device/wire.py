@@ -13,6 +13,10 @@ vehicle's side:
   COMMAND. The vehicle's watchdog hands every channel to the pilot when this
   exceeds 100 ms (spec section 4).
 
+In the AscTec LL dialect the IMU_RAWDATA answers stand for DATA and the ``>*>di``
+commands for COMMAND (:class:`WireTiming`'s ``protocol``); its watchdog is
+``serial.ll.fallback_ms``.
+
 :class:`WireTiming` records (cheaply: two appends per frame) and saves its arrays
 into the ground-truth ``.npz`` (keys :data:`KEYS`); :class:`WireRecord` reads them
 back and computes the figures.
@@ -27,8 +31,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from groundstation.asctec.decoder import StreamDecoder
-from groundstation.asctec.messages import CommandMsg, ConfigMsg
+from groundstation.asctec.decoder import START_MARKER, StreamDecoder
+from groundstation.asctec.ll import LlRequestDecoder
+from groundstation.asctec.messages import DESCRIPTOR_DATA, CommandMsg, ConfigMsg
 
 KEYS = ("wire_data_out", "wire_command_in", "wire_command_mask", "wire_config_in")
 """Truth-file keys: DATA last-byte-out times [s], COMMAND arrival times [s], their masks,
@@ -41,10 +46,14 @@ class WireTiming:
     """Records DATA-out and COMMAND-in instants at the virtual vehicle's port.
 
     profile : CRC profile of the link (COMMAND frames are decoded to find their end).
+    protocol : the link's dialect. In the AscTec LL dialect the IMU_RAWDATA answers
+    (descriptor 0x01, as the X-3D's DATA) count as DATA out and the ``>*>di`` commands
+    as COMMANDs in; there is no CONFIG.
     """
 
-    def __init__(self, profile: str) -> None:
+    def __init__(self, profile: str, protocol: str = "x3d") -> None:
         self._decoder = StreamDecoder(profile)
+        self._ll_decoder = LlRequestDecoder() if protocol == "asctec-ll" else None
         self.data_out = array("d")
         self.command_in = array("d")
         self.command_mask = array("H")
@@ -54,9 +63,22 @@ class WireTiming:
         """A DATA frame's last byte left the vehicle at ``t`` [s]."""
         self.data_out.append(t)
 
+    def frame_sent(self, t: float, frame: bytes) -> None:
+        """``frame``'s last byte left the vehicle at ``t`` [s]: stamped if it is a DATA
+        frame (X-3D: every frame; LL: IMU_RAWDATA, not the other answers and acks)."""
+        if self._ll_decoder is None or (frame[:3] == START_MARKER and len(frame) > 5
+                                        and frame[5] == DESCRIPTOR_DATA):
+            self.data_out.append(t)
+
     def received(self, t: float, data: bytes) -> None:
         """``data`` from the ground station was read at ``t`` [s]; stamp each COMMAND and
         CONFIG in it."""
+        if self._ll_decoder is not None:
+            for request in self._ll_decoder.feed(data):
+                if isinstance(request, CommandMsg):
+                    self.command_in.append(t)
+                    self.command_mask.append(request.ctrl)
+            return
         for item in self._decoder.feed(data):
             if isinstance(item, CommandMsg):
                 self.command_in.append(t)

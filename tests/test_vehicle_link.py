@@ -80,7 +80,8 @@ class PtyVehicle:
         self.repeat_values = False
         self.corrupt: Callable[[bytes], bytes] = lambda frame: frame
         self.raw_frames: list[bytes] = []  # extra frames to send with the next sample
-        self.sample_delay = 0.0  # LL: wait this long before answering a poll
+        self.latency = 0.0  # LL: answer polls and commands this long after they arrived
+        self._pending: list[tuple[float, bytes]] = []
         self._stop = threading.Event()
         self._counter = 0
         self._step = 0
@@ -133,7 +134,7 @@ class PtyVehicle:
         next_sample: float | None = None
         acks = 0
         while not self._stop.is_set():
-            timeout = 0.002 if next_sample is not None else 0.02
+            timeout = 0.001 if next_sample is not None or self._pending else 0.02
             if select.select([self.fd], [], [], timeout)[0]:
                 try:
                     data = os.read(self.fd, 4096)
@@ -149,7 +150,7 @@ class PtyVehicle:
                         if self.dialect == "asctec-ll" and not self.silent:
                             acks += 1
                             if not self.drop_every_ack or acks % self.drop_every_ack == 0:
-                                self._send(encode_ack(0))
+                                self._pending.append((now + self.latency, encode_ack(0)))
                     elif isinstance(item, ConfigMsg):
                         self.configs.append(item)
                         next_sample = now
@@ -157,9 +158,10 @@ class PtyVehicle:
                         with self._lock:
                             self.polls.append((now, item.mask))
                         if not self.silent:
-                            if self.sample_delay:
-                                time.sleep(self.sample_delay)
-                            self._send(self._ll_answer(item.mask))
+                            self._pending.append((now + self.latency,
+                                                  self._ll_answer(item.mask)))
+            while self._pending and self._pending[0][0] <= time.monotonic():
+                self._send(self._pending.pop(0)[1])
             if next_sample is not None and time.monotonic() >= next_sample:
                 next_sample += PERIOD
                 if not self.silent:
@@ -327,9 +329,14 @@ def test_corrupted_bytes_are_counted_and_skipped(vehicle: PtyVehicle) -> None:
     assert sum(stats.rejections.values()) > 0
 
 
-def test_ll_acknowledgements_are_timed_and_missing_ones_counted() -> None:
+@pytest.mark.parametrize("latency", [0.0, 0.025])
+def test_ll_acknowledgements_are_timed_and_missing_ones_counted(latency: float) -> None:
+    """Every second acknowledgement lost, on a fast line and on a radio whose round trip
+    (25 ms) exceeds the 20 ms command period: each one that comes is timed against its
+    own command, each lost one is counted, and the IMU polls lose nothing."""
     vehicle = PtyVehicle("asctec-ll")
     try:
+        vehicle.latency = latency
         vehicle.drop_every_ack = 2  # every second command goes unacknowledged
         with link_for(vehicle, command_rate_hz=50.0) as link:
             link.start_stream()
@@ -339,38 +346,45 @@ def test_ll_acknowledgements_are_timed_and_missing_ones_counted() -> None:
                 time.sleep(0.02)
             time.sleep(0.1)
             stats = link.stats()
-            elapsed = time.monotonic() - t0
+            elapsed = time.monotonic() - t0 - latency
     finally:
         vehicle.close()
     assert stats.acks + stats.acks_missing == 20
     assert stats.acks == 10 and stats.acks_missing == 10
-    # a 5-byte ack on a pty: well under a millisecond of line, and the responder's turn
-    assert all(0.0 < t < 0.01 for t in stats.ack_times)
+    # the responder's latency plus a little scheduling on a pty
+    assert all(latency <= t < latency + 0.01 for t in stats.ack_times), stats.ack_times
     # a missing acknowledgement costs the IMU polls no sample (100 Hz asked for)
     assert stats.frames["imu_rawdata"] / elapsed > 90
 
 
-def test_ll_polls_take_turns_and_slow_status_rc() -> None:
-    """Half duplex: a poll goes out only after the last one's answers (or its timeout);
-    LL_STATUS and RC_DATA ride on every 20th and 10th poll."""
+@pytest.mark.parametrize("latency", [0.0, 0.025])
+def test_ll_polls_hold_the_grid_and_slow_status_rc(latency: float) -> None:
+    """Polls go out on the 10 ms grid, one at a time, whether the vehicle answers at once
+    or after a radio round trip longer than the period (then pipelined, never in a
+    burst); LL_STATUS and RC_DATA ride on every 20th and 10th poll; every poll is
+    answered in time and the IMU rate holds."""
     vehicle = PtyVehicle("asctec-ll")
     try:
-        vehicle.sample_delay = 0.015  # slower than the 10 ms period: polls must wait
+        vehicle.latency = latency
         with link_for(vehicle) as link:
             link.start_stream()
-            samples(link, 25)
+            t0 = time.monotonic()
+            samples(link, 60)
+            rate = 59 / (time.monotonic() - t0 - latency)
             stats = link.stats()
         with vehicle._lock:
             polls = list(vehicle.polls)
     finally:
         vehicle.close()
     gaps = [b[0] - a[0] for a, b in itertools.pairwise(polls)]
-    assert min(gaps) >= 0.012  # never polled again before the answer came
+    assert min(gaps) > 0.004  # never a burst
+    assert sorted(gaps)[len(gaps) // 2] == pytest.approx(0.010, abs=0.002)
     masks = [m for _, m in polls]
     assert masks[0] == PollMask.IMU_RAWDATA | PollMask.LL_STATUS | PollMask.RC_DATA
     assert all(m & PollMask.IMU_RAWDATA for m in masks)
     assert [i for i, m in enumerate(masks) if m & PollMask.RC_DATA][:3] == [0, 10, 20]
     assert stats.polls_unanswered == 0
+    assert rate > 85
 
 
 def test_ll_repeated_values_are_a_repeated_sample() -> None:
@@ -410,34 +424,52 @@ def test_x3d_link_refuses_ll_imu_rawdata_that_passes_for_data() -> None:
     assert not any(isinstance(x, RejectedFrame) for x in got)
 
 
-def test_poll_schedule_grid_and_ack_matching_without_io() -> None:
-    """The schedule alone, on made-up times: polls on a 10 ms grid (a late one does not
-    shift the grid or burst), status/RC on every 20th/10th, and an acknowledgement
-    answering the newest command owed."""
-    s = PollSchedule(0.01, status_every=20, rc_every=10, answer_timeout=0.02,
-                     ack_timeout=0.04)
+def test_poll_schedule_grid_turns_and_ack_matching_without_io() -> None:
+    """The schedule alone, on made-up times: polls on a 10 ms grid, status/RC with every
+    20th/10th; a poll waits for the vehicle's answers at most half a period past its slot
+    (then pipelines), skips missed slots without a burst, counts unanswered polls; an
+    acknowledgement settles the command whose age is nearest the typical round trip."""
+    s = PollSchedule(0.01, status_every=20, rc_every=10, answer_timeout=0.05,
+                     ack_timeout=0.05)
     assert s.poll_due(0.0) is None  # not started
     s.start(1.0)
     assert s.poll_due(1.0) == 0x000B
-    assert s.poll_due(1.005) is None  # answers owed, and not yet the next slot
+    assert s.poll_due(1.005) is None
     for d in (0x01, 0x02, 0x15):
-        s.answered(d)
+        s.answered(d, 1.004)
     assert s.poll_due(1.0099) is None and s.poll_due(1.010) == 0x0002
-    s.answered(0x01)
-    assert s.poll_due(1.0351) == 0x0002  # late: the 1.02 and 1.03 slots are gone
-    assert s.next_deadline() == pytest.approx(1.0551)  # its answers are owed
-    s.answered(0x01)
-    assert s.next_deadline() == pytest.approx(1.04)
-    s.command_sent(1.036)
-    s.command_sent(1.0365)
-    s.acked(1.037)
-    assert s.acks == 1 and s.acks_missing == 1 and s.ack_times[-1] == pytest.approx(0.0005)
-    s.command_sent(1.038)
-    assert s.poll_due(1.041) is None  # its ack is owed: wait, at most half a period
-    assert s.poll_due(1.0449) is None and s.poll_due(1.045) == 0x0002
-    assert s.polls_unanswered == 0 and s.acks_missing == 1
-    s.poll_due(1.2)  # the last poll's answer never came: counted, and the ack expired
-    assert s.polls_unanswered == 1 and s.acks_missing == 2
+    assert s.poll_due(1.020) is None  # the vehicle still has the turn
+    assert s.next_deadline() == pytest.approx(1.025)
+    assert s.poll_due(1.025) == 0x0002  # half a period late: pipelined
+    s.answered(0x01, 1.027)
+    s.answered(0x01, 1.028)
+    assert s.poll_due(1.030) == 0x0002  # answers in: on its slot
+    assert s.poll_due(1.0651) == 0x0002  # late: one poll, the 1.05 and 1.06 slots skipped
+    assert s.next_deadline() == pytest.approx(1.075)
+    assert s.polls_unanswered == 0
+    s.poll_due(1.0811)  # the 1.030 poll's answer never came within 50 ms
+    assert s.polls_unanswered == 1
+    # acknowledgements on a fast line: a lost one is found by the typical round trip
+    s.command_sent(2.0)
+    s.acked(2.0005)
+    s.command_sent(2.020)
+    s.command_sent(2.040)
+    s.acked(2.0406)
+    assert s.acks == 2 and s.acks_missing == 1
+    assert s.ack_times[-1] == pytest.approx(0.0006)
+    # on a radio whose round trip (28 ms) is longer than the command period (20 ms): no
+    # acknowledgement can come sooner than the polls' round trip less 4 ms of bytes
+    r = PollSchedule(0.01)
+    r.start(0.0)
+    assert r.poll_due(0.0) == 0x000B
+    r.answered(0x01, 0.028)
+    r.command_sent(0.000)  # its acknowledgement is lost
+    r.command_sent(0.020)
+    r.command_sent(0.040)
+    r.acked(0.046)  # the 0.020 command's: at least 28 - 4 ms after it
+    r.acked(0.066)  # the 0.040 command's
+    assert list(r.ack_times) == pytest.approx([0.026, 0.026])
+    assert r.acks_missing == 1
 
 
 def test_ll_fallback_bounds_the_command_rate() -> None:

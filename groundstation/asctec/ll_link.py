@@ -5,9 +5,9 @@ The LL vehicle sends only what it is asked for, so the link drives the stream it
 * :class:`PollSchedule` (sans-IO, times passed in) polls IMU_RAWDATA every data period
   and adds LL_STATUS and RC_DATA to every ``status_every``-th and ``rc_every``-th poll.
   It takes turns as the public drivers do on the half-duplex radio: the next poll waits
-  until the previous one's answers are in (at most ``answer_timeout``) and the last
-  command's acknowledgement too (at most half a period past the poll's slot), then goes
-  out on the period's grid, never in a burst.
+  until the previous one's answers and the last command's acknowledgement are in, but
+  at most half a period past its slot, so a radio whose round trip is longer than the
+  period still gets every poll (pipelined); never in a burst.
   It counts polls not answered in time and commands not acknowledged in time, and keeps
   the command-to-acknowledgement times.
 * :class:`LlLink` has the X-3D :class:`~groundstation.asctec.link.SerialLink`'s
@@ -45,6 +45,9 @@ from groundstation.asctec.decoder import Ack
 from groundstation.asctec.keepalive import CommandSchedule
 from groundstation.asctec.link import ReceivedData, _link_error, _open_port
 from groundstation.asctec.ll import (
+    ACK_FRAME_SIZE,
+    COMMAND_SIZE,
+    POLL_SIZE,
     ImuRawData,
     LlDecoder,
     LlStatus,
@@ -67,17 +70,38 @@ _ANSWER_OF = {PollMask.IMU_RAWDATA: ImuRawData.DESCRIPTOR,
               PollMask.LL_STATUS: LlStatus.DESCRIPTOR, PollMask.RC_DATA: RcData.DESCRIPTOR}
 
 
+@dataclass
+class _Outstanding:
+    """A poll whose answers have not all arrived: its send time and the descriptors owed."""
+
+    t: float
+    owed: set[int]
+
+
 class PollSchedule:
-    """When to poll and for what, with the half-duplex turn and the acknowledgement
-    bookkeeping. Times are monotonic seconds; nothing here reads a clock.
+    """When to poll and for what, taking turns with the vehicle, and the bookkeeping of
+    answers and acknowledgements. Times are monotonic seconds; nothing here reads a clock.
 
     period : IMU poll period [s]; status_every, rc_every : LL_STATUS / RC_DATA with every
-    n-th poll (the first poll asks for both); answer_timeout, ack_timeout : [s].
+    n-th poll (the first poll asks for both); answer_timeout : a poll's answers not all in
+    by then count it unanswered [s]; ack_timeout : likewise for a command's
+    acknowledgement [s].
+
+    Turn-taking: a due poll waits while the previous poll's answers or the last command's
+    acknowledgement are still owed, but at most half a period past its slot on the grid;
+    then it goes out anyway (the answers of a radio with a round trip longer than the
+    period are then pipelined), so the IMU rate holds whatever the latency. Answers and
+    acknowledgements come back in order and carry no reference: an answer settles the
+    oldest poll that owes it; an acknowledgement settles the oldest command owed unless a
+    newer one is already old enough to have been answered (older than the shortest poll
+    round trip, adjusted for the bytes on the line, ``byte_time`` [s] each): then the
+    older one's acknowledgement was lost. So a round trip longer than the command period
+    (a radio) and a lost acknowledgement on a fast line are both told apart.
     """
 
-    def __init__(self, period: float, *, status_every: int = 20, rc_every: int = 10,
-                 answer_timeout: float = 0.02, ack_timeout: float = 0.04,
-                 history: int = 4096) -> None:
+    def __init__(self, period: float, *, status_every: int = 10, rc_every: int = 10,
+                 answer_timeout: float = 0.05, ack_timeout: float = 0.05,
+                 byte_time: float = 10.0 / 57600, history: int = 4096) -> None:
         if not (period > 0 and status_every >= 1 and rc_every >= 1 and answer_timeout > 0
                 and ack_timeout > 0):
             raise ConfigError("poll schedule: period and timeouts > 0, every >= 1 required")
@@ -86,12 +110,15 @@ class PollSchedule:
         self.rc_every = rc_every
         self.answer_timeout = answer_timeout
         self.ack_timeout = ack_timeout
-        self._ack_turn = min(ack_timeout, answer_timeout)
         self._next: float | None = None
-        self._expect: set[int] = set()
-        self._turn_until = -float("inf")
+        self._polls: deque[_Outstanding] = deque()
         self._unacked: deque[float] = deque()
         self.ack_times: deque[float] = deque(maxlen=history)
+        self._recent_rtts: deque[float] = deque(maxlen=63)
+        # an acknowledgement's round trip against a poll's: 17 + 5 bytes on the line
+        # instead of 6 + 39 (an IMU_RAWDATA answer)
+        self._ack_minus_poll = byte_time * ((COMMAND_SIZE + ACK_FRAME_SIZE)
+                                            - (POLL_SIZE + ImuRawData.STRUCT.size + 11))
         self.polls_sent = 0
         self.polls_unanswered = 0
         self.acks = 0
@@ -115,12 +142,8 @@ class PollSchedule:
         self._expire(t)
         if self._next is None or t < self._next:
             return None
-        if self._expect and t < self._turn_until:
-            return None  # the last poll's answers are still coming
-        if self._unacked and t < self._ack_wait_until():
-            return None  # the vehicle owes the last command's acknowledgement
-        if self._expect:
-            self.polls_unanswered += 1
+        if self._vehicle_has_turn() and t < self._next + 0.5 * self.period:
+            return None
         k = self.polls_sent
         mask = PollMask.IMU_RAWDATA
         if k % self.status_every == 0:
@@ -128,56 +151,68 @@ class PollSchedule:
         if k % self.rc_every == 0:
             mask |= PollMask.RC_DATA
         self.polls_sent += 1
-        self._expect = {d for bit, d in _ANSWER_OF.items() if mask & bit}
-        self._turn_until = t + self.answer_timeout
+        self._polls.append(_Outstanding(t, {d for bit, d in _ANSWER_OF.items() if mask & bit}))
         while self._next <= t:  # the next slot on the grid; missed slots are skipped
             self._next += self.period
         return int(mask)
 
-    def answered(self, descriptor: int) -> None:
-        """A packet with ``descriptor`` arrived (an answer to the last poll)."""
-        self._expect.discard(descriptor)
+    def _vehicle_has_turn(self) -> bool:
+        return bool(self._polls) or bool(self._unacked)
+
+    def answered(self, descriptor: int, t: float) -> None:
+        """A packet with ``descriptor`` arrived at ``t``: it answers the oldest poll owing
+        one (an IMU answer also measures the poll's round trip)."""
+        for poll in self._polls:
+            if descriptor in poll.owed:
+                poll.owed.discard(descriptor)
+                if descriptor == ImuRawData.DESCRIPTOR:
+                    self._recent_rtts.append(t - poll.t)
+                break
+        while self._polls and not self._polls[0].owed:
+            self._polls.popleft()
 
     def command_sent(self, t: float) -> None:
         """A command was written at ``t``: its acknowledgement is owed."""
         self._unacked.append(t)
 
     def acked(self, t: float) -> None:
-        """An acknowledgement arrived at ``t``: it answers the newest command owed (the
-        acknowledgement carries no reference; with a round trip shorter than the command
-        period that is the right one), and any older command owed never got its own."""
+        """An acknowledgement arrived at ``t`` (see the class docstring for which command
+        it settles)."""
         self._expire(t)
         if not self._unacked:
             self.acks_unexpected += 1
             return
-        sent = self._unacked.pop()
-        self.acks_missing += len(self._unacked)
-        self._unacked.clear()
+        shortest = self._shortest_ack_time()
+        while len(self._unacked) > 1 and t - self._unacked[1] >= shortest:
+            self._unacked.popleft()  # a newer command could be the one answered: this
+            self.acks_missing += 1  # one's acknowledgement was lost
+        age = t - self._unacked.popleft()
         self.acks += 1
-        self.ack_times.append(t - sent)
+        self.ack_times.append(age)
+
+    def _shortest_ack_time(self) -> float:
+        """The shortest time an acknowledgement can take [s]: the shortest recent poll
+        round trip, less the difference in bytes on the line (a command and an
+        acknowledgement are 22 bytes, a poll and its IMU answer 45); 0 before any."""
+        if not self._recent_rtts:
+            return 0.0
+        return max(0.0, min(self._recent_rtts) + self._ack_minus_poll)
 
     def _expire(self, t: float) -> None:
         while self._unacked and t - self._unacked[0] > self.ack_timeout:
             self._unacked.popleft()
             self.acks_missing += 1
+        while self._polls and t - self._polls[0].t > self.answer_timeout:
+            self._polls.popleft()
+            self.polls_unanswered += 1
 
     def next_deadline(self) -> float | None:
         """The next time :meth:`poll_due` may return a mask (None before :meth:`start`)."""
         if self._next is None:
             return None
-        deadline = self._next
-        if self._expect:
-            deadline = max(deadline, self._turn_until)
-        if self._unacked:
-            deadline = max(deadline, self._ack_wait_until())
-        return deadline
-
-    def _ack_wait_until(self) -> float:
-        """How long a due poll waits for the last command's acknowledgement: at most the
-        answer timeout after the command and half a period after the poll's slot, so an
-        acknowledgement that never comes costs the IMU stream no sample."""
-        assert self._next is not None
-        return min(self._unacked[-1] + self._ack_turn, self._next + 0.5 * self.period)
+        if self._vehicle_has_turn():
+            return self._next + 0.5 * self.period  # sooner when the vehicle answers
+        return self._next
 
 
 @dataclass(frozen=True, slots=True)
@@ -203,8 +238,8 @@ class LlLink:
 
     def __init__(self, url: str, *, baudrate: int = 57600, profile: str = DEFAULT_PROFILE,
                  period: float = 0.01, command_rate: float = 50.0, stale_after: float = 0.25,
-                 keepalive_slack: float = 0.0, fallback: float = 0.1, status_every: int = 20,
-                 rc_every: int = 10, answer_timeout: float = 0.02, ack_timeout: float = 0.04,
+                 keepalive_slack: float = 0.0, fallback: float = 0.1, status_every: int = 10,
+                 rc_every: int = 10, answer_timeout: float = 0.05, ack_timeout: float = 0.05,
                  rc_map: RcMap = RcMap(), queue_size: int = 256, rate_window: float = 1.0,
                  write_timeout: float = 1.0) -> None:
         profile_init(profile)
@@ -212,7 +247,8 @@ class LlLink:
         self._decoder = LlDecoder(profile)
         self._monitor = DataStreamMonitor(rate_window=rate_window)
         self._polls = PollSchedule(period, status_every=status_every, rc_every=rc_every,
-                                   answer_timeout=answer_timeout, ack_timeout=ack_timeout)
+                                   answer_timeout=answer_timeout, ack_timeout=ack_timeout,
+                                   byte_time=10.0 / baudrate)
         self._commands = CommandSchedule(command_rate=command_rate, stale_after=stale_after,
                                          slack=keepalive_slack, watchdog=fallback)
         self._rc_map = rc_map
@@ -220,6 +256,7 @@ class LlLink:
         self._queue: deque[ReceivedData] = deque(maxlen=queue_size)
         self._lock = threading.Condition()  # schedules, decoder, queue, writes, counters
         self._status: LlStatus | None = None
+        self._status_t = -float("inf")
         self._rc: RcData | None = None
         self._new_status = False
         self._new_rc = False
@@ -322,6 +359,19 @@ class LlLink:
         """Monotonic times [s] of the most recent command writes, oldest first."""
         with self._lock:
             return self._commands.write_times()
+
+    def wait_status(self, timeout: float, newer_than: float = -float("inf")) -> LlStatus | None:
+        """The vehicle's last LL_STATUS received after ``newer_than`` (monotonic [s]),
+        waiting up to ``timeout`` [s] for one; None if none came (polling must run)."""
+        deadline = time.monotonic() + timeout
+        with self._lock:
+            while self._status is None or self._status_t <= newer_than:
+                self._check_usable()
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    return None
+                self._lock.wait(remaining)
+            return self._status
 
     def stats(self) -> LinkStats:
         """A consistent snapshot of the link's counters."""
@@ -447,13 +497,14 @@ class LlLink:
                 if isinstance(item, Ack):
                     self._polls.acked(t)
                 elif isinstance(item, ImuRawData):
-                    self._polls.answered(item.DESCRIPTOR)
+                    self._polls.answered(item.DESCRIPTOR, t)
                     self._queue_sample(t, item)
                 elif isinstance(item, LlStatus):
-                    self._polls.answered(item.DESCRIPTOR)
+                    self._polls.answered(item.DESCRIPTOR, t)
                     self._status, self._new_status = item, True
+                    self._status_t = t
                 elif isinstance(item, RcData):
-                    self._polls.answered(item.DESCRIPTOR)
+                    self._polls.answered(item.DESCRIPTOR, t)
                     self._rc, self._new_rc = item, True
             self._lock.notify_all()  # the turn may have come back to the host
 

@@ -89,7 +89,21 @@ def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
         min_data_rate_hz=0.8 * 1000.0 / config.serial.data_period_ms,
         min_vicon_rate_hz=config.vicon.min_rate_hz, on_signal=s.on_signal,
         battery_land_v=s.battery_land_v, battery_grace_s=s.battery_grace_s,
+        pilot_grace_s=pilot_grace_s(config),
     )
+
+
+def pilot_grace_s(config: GroundStationConfig) -> float:
+    """How long the vehicle may report not applying our commands before it is the pilot's
+    [s]: the supervisor's 0.2 s, or, in the AscTec LL dialect, whose status is polled only
+    every ``serial.ll.status_every`` IMU periods, two of those periods plus a round trip
+    (the first report after a command may be one period old when it is sent)."""
+    grace = SupervisorLimits().pilot_grace_s
+    if config.serial.protocol == "asctec-ll":
+        ll = config.serial.ll
+        status_period = ll.status_every * config.serial.data_period_ms / 1000.0
+        grace = max(grace, 2.0 * status_period + ll.answer_timeout_ms / 1000.0)
+    return grace
 
 
 class FlightCore:

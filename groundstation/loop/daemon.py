@@ -52,7 +52,7 @@ import threading
 import time
 from collections.abc import Callable
 from contextlib import ExitStack
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from functools import partial
 
 import numpy as np
@@ -60,6 +60,7 @@ import structlog
 
 from groundstation.asctec.dialect import VehicleLink, open_link
 from groundstation.asctec.messages import CHANNELS
+from groundstation.asctec.stats import LinkStats
 from groundstation.config import GroundStationConfig, dump_config
 from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
@@ -111,6 +112,9 @@ class FlightSummary:
     collector : garbage collections during the loop and their longest pauses
     control : the control socket's counters (:class:`~groundstation.telemetry.control.
         ControlStats`: requests answered, malformed, refused...)
+    link, protocol, baud : the serial link's counters at the end (bytes each way,
+        rejections; in the AscTec LL dialect polls and acknowledgements), its dialect and
+        line rate [baud]
     """
 
     final_state: State
@@ -133,6 +137,9 @@ class FlightSummary:
     keepalive_resends: int = 0
     collector: CollectorStats = field(default_factory=CollectorStats)
     control: dict[str, int] = field(default_factory=dict)
+    link: LinkStats | None = None
+    protocol: str = "x3d"
+    baud: int = 57600
 
     def percentiles(self) -> dict[str, tuple[float, float]]:
         """p50 and p99 of compute time, |jitter| and latency [s]."""
@@ -156,6 +163,7 @@ class _Stats:
     max_command_gap: float = math.nan
     keepalive_resends: int = 0
     collector: CollectorStats = field(default_factory=CollectorStats)
+    link: LinkStats | None = None
 
 
 class FlightDaemon:
@@ -243,6 +251,7 @@ class FlightDaemon:
             stats = link.stats()
             self._stats.max_command_gap = stats.max_command_gap
             self._stats.keepalive_resends = stats.keepalive_resends
+            self._stats.link = stats
             self._stats.collector = pacer.stats
             summary = self._summary()
             recorder.meta["outcome"] = _outcome_meta(summary)
@@ -405,7 +414,8 @@ class FlightDaemon:
             reason=sup.transitions[-1].reason if sup.transitions else "",
             events=list(sup.events), max_command_gap_s=s.max_command_gap,
             keepalive_resends=s.keepalive_resends, collector=s.collector,
-            control=self._control_stats(),
+            control=self._control_stats(), link=s.link,
+            protocol=self.config.serial.protocol, baud=self.config.serial.baud,
         )
 
 
@@ -452,7 +462,51 @@ def _outcome_meta(summary: FlightSummary) -> dict[str, object]:
             for tr in summary.transitions if tr.failsafe],
         "events": [{"t": e.t, "kind": e.kind, "duration_s": e.duration_s, "reason": e.reason}
                    for e in summary.events],
+        "link": None if (link := link_figures(summary)) is None else asdict(link),
     }
+
+
+@dataclass(frozen=True, slots=True)
+class LinkFigures:
+    """The serial link over one flight: bytes per second each way [B/s] and their share of
+    the line (10 bits per byte at the baud), rejected frame candidates, X-3D DATA of an
+    unexpected mask; in the AscTec LL dialect also polls (and unanswered ones) and command
+    acknowledgements (and missing ones) with their p50/p99 time [ms]."""
+
+    protocol: str
+    seconds: float
+    in_bytes_per_s: float
+    out_bytes_per_s: float
+    in_line_share: float
+    out_line_share: float
+    rejected: int
+    unexpected_data: int
+    polls: int | None = None
+    polls_unanswered: int | None = None
+    acks: int | None = None
+    acks_missing: int | None = None
+    ack_p50_ms: float | None = None
+    ack_p99_ms: float | None = None
+
+
+def link_figures(summary: FlightSummary) -> LinkFigures | None:
+    """:class:`LinkFigures` of a flight (None without link counters)."""
+    stats, seconds = summary.link, summary.duration_s
+    if stats is None or not seconds > 0:
+        return None
+    line = summary.baud / 10.0  # bytes per second one way
+    ll: dict[str, float | int | None] = {}
+    if summary.protocol == "asctec-ll":
+        times = sorted(stats.ack_times)
+        p50 = 1e3 * times[len(times) // 2] if times else None
+        p99 = 1e3 * times[min(len(times) - 1, int(0.99 * len(times)))] if times else None
+        ll = {"polls": stats.polls_sent, "polls_unanswered": stats.polls_unanswered,
+              "acks": stats.acks, "acks_missing": stats.acks_missing, "ack_p50_ms": p50,
+              "ack_p99_ms": p99}
+    return LinkFigures(
+        summary.protocol, seconds, stats.bytes_in / seconds, stats.bytes_out / seconds,
+        stats.bytes_in / seconds / line, stats.bytes_out / seconds / line,
+        sum(stats.rejections.values()), stats.unexpected_data, **ll)  # type: ignore[arg-type]
 
 
 def _drain(vicon: ViconClient) -> list[Pose]:

@@ -32,7 +32,7 @@ from pathlib import Path
 from groundstation.config import GroundStationConfig, apply_overrides
 from groundstation.errors import ConfigError, GroundStationError
 from groundstation.loop.core import FlightCore
-from groundstation.loop.daemon import FlightDaemon, FlightSummary
+from groundstation.loop.daemon import FlightDaemon, FlightSummary, link_figures
 from groundstation.loop.supervisor import Outcome
 
 Echo = Callable[[str], None]
@@ -91,6 +91,16 @@ def summary_lines(summary: FlightSummary) -> list[str]:
         lines.append(f"  control socket: {c.get('answered', 0)} requests answered, "
                      + ", ".join(f"{n} {name.replace('_', ' ')}" for name, n in c.items()
                                  if n and name != "answered"))
+    link = link_figures(summary)
+    if link is not None:
+        lines.append(f"  serial link ({link.protocol}): in {link.in_bytes_per_s:.0f} B/s "
+                     f"({100 * link.in_line_share:.0f} % of the line), out "
+                     f"{link.out_bytes_per_s:.0f} B/s ({100 * link.out_line_share:.0f} %), "
+                     f"{link.rejected} rejected")
+        if link.ack_p50_ms is not None and link.ack_p99_ms is not None:
+            lines.append(f"  polls {link.polls} ({link.polls_unanswered} unanswered), "
+                         f"acknowledgements {link.acks} ({link.acks_missing} missing), "
+                         f"command->ack p50/p99 {link.ack_p50_ms:.1f}/{link.ack_p99_ms:.1f} ms")
     lines.append(f"  flight log: {summary.log_dir}")
     return lines
 
@@ -148,7 +158,8 @@ def _start_virtual_lab(config: GroundStationConfig, stack: ExitStack, workdir: P
     except RuntimeError as exc:
         raise GroundStationError(f"the virtual lab did not start: {exc}") from exc
     address, port = lab.vicon_target
-    echo(f"virtual lab: X-3D on {lab.serial_port}, Vicon -> udp://{address}:{port}")
+    echo(f"virtual lab: vehicle ({config.serial.protocol}) on {lab.serial_port}, "
+         f"Vicon -> udp://{address}:{port}")
     return apply_overrides(config, {"serial.port": lab.serial_port}), lab.truth_file
 
 
