@@ -112,9 +112,13 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     assert np.all((rows["battery_v"] > 11.7) & (rows["battery_v"] <= 11.8))
     tracking = rows["state"] == int(State.TRACK)
     assert np.all(rows["vehicle_flags"][tracking] & 0x01)  # the X-3D applied our commands
+    link = meta["outcome"].pop("link")
     assert meta["outcome"] == {"outcome": "COMPLETED", "exit_code": 0, "final_state": "DONE",
                                "reason": summary.reason, "failsafe_transitions": [],
                                "events": []}
+    # DATA of status, gyro, acc, rc (41 B) at 100 Hz: 4100 B/s, 71 % of the 5760 B/s line
+    assert link["protocol"] == "x3d" and 0.6 < link["in_line_share"] < 0.75
+    assert link["rejected"] == 0 and link["unexpected_data"] == 0
     assert summary.commands_sent > 0.4 * summary.ticks  # 50 Hz commands on 100 Hz ticks
     # The handover reached the wire: about 0.5 s of COMMANDs without the yaw bit (25 at
     # 50 Hz; the bound leaves room for a loaded machine), then all four channels again.
@@ -146,3 +150,39 @@ def test_demo_keeps_the_truth_with_the_log_and_reports_against_it(tmp_path: Path
     assert report["metrics"]["final_state"] == "DONE"
     assert (log / "report" / "flight.png").stat().st_size > 10_000
     assert "judged from virtual-lab ground truth" in out.stdout
+
+
+@pytest.mark.slow
+def test_real_time_flight_in_the_asctec_ll_dialect(tmp_path: Path) -> None:
+    """`gs fly --protocol asctec-ll`'s daemon against the virtual LL vehicle over a pty:
+    polled IMU at 100 Hz, acknowledged commands, take-off, hover, landing and handback,
+    judged from the lab's truth."""
+    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {
+        "serial.protocol": "asctec-ll", "trajectory.name": "hover",
+        "vicon.port": free_udp_port(), "telemetry.endpoint": "tcp://127.0.0.1:*",
+        "logging.flight_log_dir": str(tmp_path), "telemetry.control_endpoint": None,
+        "sim.truth_file": str(tmp_path / "truth.npz"),
+    })
+    cfg_file = tmp_path / "lab.yaml"
+    cfg_file.write_text(dump_config(cfg), encoding="utf-8")
+    with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as device:
+        summary = FlightDaemon(apply_overrides(cfg, {"serial.port": device.pty_path}),
+                               duration_s=4.0).run()
+        time.sleep(0.3)  # the final ctrl mask 0 reaches the vehicle
+    assert summary.final_state is State.DONE and summary.success, summary.transitions
+    rows, meta, _ = read_flight(summary.log_dir)
+    link = meta["outcome"]["link"]
+    assert link["protocol"] == "asctec-ll"
+    assert link["polls_unanswered"] <= 0.01 * link["polls"]
+    assert link["acks_missing"] <= 0.01 * link["acks"]
+    assert 0.015 < link["ack_p50_ms"] / 1e3 < link["ack_p99_ms"] / 1e3 < 0.08
+    assert link["in_line_share"] < 1.0 and link["out_line_share"] < 0.5
+    # the IMU came at the polled 100 Hz, each sample once (no repeats without a counter)
+    tracking = rows["state"] == int(State.TRACK)
+    interval = np.diff(np.unique(rows["imu_t"][tracking]))
+    assert 0.009 < float(np.median(interval)) < 0.011
+    assert np.all(rows["vehicle_flags"][tracking] & 0x01)  # applying our commands
+    truth = np.load(tmp_path / "truth.npz")
+    hovering = truth["ctrl_mask"] == 0xF
+    assert -truth["position"][hovering, 2].min() > 0.9
+    assert truth["on_ground"][-1] and truth["ctrl_mask"][-1] == 0

@@ -382,7 +382,7 @@ def test_ll_polls_hold_the_grid_and_slow_status_rc(latency: float) -> None:
     masks = [m for _, m in polls]
     assert masks[0] == PollMask.IMU_RAWDATA | PollMask.LL_STATUS | PollMask.RC_DATA
     assert all(m & PollMask.IMU_RAWDATA for m in masks)
-    assert [i for i, m in enumerate(masks) if m & PollMask.RC_DATA][:3] == [0, 10, 20]
+    assert [i for i, m in enumerate(masks) if m & PollMask.RC_DATA][:3] == [0, 5, 15]
     assert stats.polls_unanswered == 0
     assert rate > 85
 

@@ -83,7 +83,8 @@ class PollSchedule:
     answers and acknowledgements. Times are monotonic seconds; nothing here reads a clock.
 
     period : IMU poll period [s]; status_every, rc_every : LL_STATUS / RC_DATA with every
-    n-th poll (the first poll asks for both); answer_timeout : a poll's answers not all in
+    n-th poll (the first poll asks for both; RC_DATA half its period after LL_STATUS, so
+    the two ride on different polls when the periods are equal); answer_timeout : a poll's answers not all in
     by then count it unanswered [s]; ack_timeout : likewise for a command's
     acknowledgement [s].
 
@@ -148,8 +149,8 @@ class PollSchedule:
         mask = PollMask.IMU_RAWDATA
         if k % self.status_every == 0:
             mask |= PollMask.LL_STATUS
-        if k % self.rc_every == 0:
-            mask |= PollMask.RC_DATA
+        if k == 0 or k % self.rc_every == self.rc_every // 2:
+            mask |= PollMask.RC_DATA  # between the status polls: no 110-byte bursts
         self.polls_sent += 1
         self._polls.append(_Outstanding(t, {d for bit, d in _ANSWER_OF.items() if mask & bit}))
         while self._next <= t:  # the next slot on the grid; missed slots are skipped
