@@ -138,8 +138,9 @@ def test_demo_keeps_the_truth_with_the_log_and_reports_against_it(tmp_path: Path
     import sys
 
     out = subprocess.run(
-        [sys.executable, "-m", "groundstation", "fly", "--config", str(REPO / "config" / "sim.yaml"),
-         "--demo", "--trajectory", "hover", "--duration", "2", "--log-dir", str(tmp_path)],
+        [sys.executable, "-m", "groundstation", "fly", "--config",
+         str(REPO / "config" / "sim.yaml"), "--demo", "--trajectory", "hover", "--duration", "2",
+         "--log-dir", str(tmp_path)],
         capture_output=True, text=True, timeout=110, cwd=REPO)
     assert out.returncode == 0, out.stdout + out.stderr
     (log,) = [p for p in tmp_path.iterdir() if (p / "meta.json").exists()]

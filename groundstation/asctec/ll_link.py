@@ -84,9 +84,9 @@ class PollSchedule:
 
     period : IMU poll period [s]; status_every, rc_every : LL_STATUS / RC_DATA with every
     n-th poll (the first poll asks for both; RC_DATA half its period after LL_STATUS, so
-    the two ride on different polls when the periods are equal); answer_timeout : a poll's answers not all in
-    by then count it unanswered [s]; ack_timeout : likewise for a command's
-    acknowledgement [s].
+    the two ride on different polls when the periods are equal); answer_timeout : a
+    poll's answers not all in by then count it unanswered [s]; ack_timeout : likewise
+    for a command's acknowledgement [s].
 
     Turn-taking: a due poll waits while the previous poll's answers or the last command's
     acknowledgement are still owed, but at most half a period past its slot on the grid;
