@@ -1,6 +1,6 @@
 """Ground station for an AscTec X-3D quadrotor flown in a Vicon motion-capture lab.
 
-Conventions used throughout the package (see ``shared/DESIGN.md``):
+Conventions used throughout the package (README, "Conventions"):
 
 * SI units inside; RC stick units only at the serial-protocol edge.
 * Earth frame NED (x north, y east, z down), body frame FRD (x forward, y right,

@@ -11,7 +11,7 @@ fraction where an integer is meant, and any infinite or NaN number (see
 
 Every numeric default names its source in a comment: a thesis equation or
 table ("eq. 3.7", "Table 6.2"), the spec, or the reason it was chosen where the
-thesis is silent (see the errata in ``shared/DESIGN.md``).
+thesis is silent or its printed equation has a typo (derived again and tested).
 
 Single fields can be overridden (the ``gs fly --serial-port ...`` options) with
 :func:`apply_overrides`, which re-validates the whole model so an override is
@@ -190,7 +190,7 @@ class LlConfig(ConfigModel):
 
 
 class SerialConfig(ConfigModel):
-    """The serial link to the vehicle (X-3D dialect ``spec/x3d-serial-protocol.md`` or the
+    """The serial link to the vehicle (X-3D dialect ``docs/protocol.md`` or the
     AscTec LL dialect; docs/protocol.md)."""
 
     protocol: Literal["x3d", "asctec-ll"] = "x3d"
@@ -266,7 +266,7 @@ Box = tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
 
 
 class ViconConfig(ConfigModel):
-    """The Vicon UDP object stream (``spec/vicon-udp.md``)."""
+    """The Vicon UDP object stream (``docs/vicon-udp.md``)."""
 
     bind_address: str = "0.0.0.0"
     port: int = Field(51001, ge=1, le=65535)  # Tracker's conventional UDP object-stream port

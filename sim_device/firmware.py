@@ -1,4 +1,4 @@
-"""The vehicle side of the X-3D serial protocol (``spec/x3d-serial-protocol.md``).
+"""The vehicle side of the X-3D serial protocol (``docs/protocol.md``).
 
 What the ResearchPilot-style firmware does with the messages the project's own
 codec (:mod:`groundstation.asctec`) reads and writes:

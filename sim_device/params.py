@@ -258,7 +258,7 @@ class FaultParams:
 
 @dataclass(frozen=True, slots=True)
 class ViconSimParams:
-    """The virtual Vicon Tracker (``spec/vicon-udp.md``).
+    """The virtual Vicon Tracker (``docs/vicon-udp.md``).
 
     rate_hz : datagrams per second (any rate; the thesis used 100, 10 and 1)
     latency : delay from the pose instant to delivery [s]

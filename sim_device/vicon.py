@@ -3,7 +3,7 @@
 Every ``1 / rate_hz`` the tracker takes the true pose, decides whether the
 object is tracked, and encodes one datagram with the project's own codec
 (:func:`groundstation.vicon.decoder.encode_datagram`) in exactly the layout of
-``spec/vicon-udp.md``; the NED/FRD -> Vicon conversion is the inverse in
+``docs/vicon-udp.md``; the NED/FRD -> Vicon conversion is the inverse in
 :mod:`groundstation.vicon.frames`. The datagram is delivered ``latency`` later.
 
 Tracked means: inside the tracked volume (Table B.1), tilted no more than

@@ -352,7 +352,7 @@ def test_ll_acknowledgements_are_timed_and_missing_ones_counted(latency: float) 
     assert stats.acks + stats.acks_missing == 20
     assert stats.acks == 10 and stats.acks_missing == 10
     # the responder's latency plus a little scheduling on a pty
-    assert all(latency <= t < latency + 0.01 for t in stats.ack_times), stats.ack_times
+    assert all(latency <= t < latency + 0.015 for t in stats.ack_times), stats.ack_times
     # a missing acknowledgement costs the IMU polls no sample (100 Hz asked for)
     assert stats.frames["imu_rawdata"] / elapsed > 90
 
@@ -449,16 +449,16 @@ def test_poll_schedule_grid_turns_and_ack_matching_without_io() -> None:
     assert s.polls_unanswered == 0
     s.poll_due(1.0811)  # the 1.030 poll's answer never came within 50 ms
     assert s.polls_unanswered == 1
-    # acknowledgements on a fast line: a lost one is found by the typical round trip
+    # acknowledgements, in order: a command older than the longest recent poll round trip
+    # (17 ms here) plus 10 ms lost its acknowledgement
     s.command_sent(2.0)
     s.acked(2.0005)
-    s.command_sent(2.020)
-    s.command_sent(2.040)
-    s.acked(2.0406)
+    s.command_sent(2.020)  # its acknowledgement is lost
+    s.command_sent(2.050)
+    s.acked(2.0506)
     assert s.acks == 2 and s.acks_missing == 1
     assert s.ack_times[-1] == pytest.approx(0.0006)
-    # on a radio whose round trip (28 ms) is longer than the command period (20 ms): no
-    # acknowledgement can come sooner than the polls' round trip less 4 ms of bytes
+    # on a radio whose round trip (28 ms) is longer than the command period (20 ms)
     r = PollSchedule(0.01)
     r.start(0.0)
     assert r.poll_due(0.0) == 0x000B
@@ -466,7 +466,7 @@ def test_poll_schedule_grid_turns_and_ack_matching_without_io() -> None:
     r.command_sent(0.000)  # its acknowledgement is lost
     r.command_sent(0.020)
     r.command_sent(0.040)
-    r.acked(0.046)  # the 0.020 command's: at least 28 - 4 ms after it
+    r.acked(0.046)  # the 0.020 command's (the 0.000 one is 46 ms old: lost)
     r.acked(0.066)  # the 0.040 command's
     assert list(r.ack_times) == pytest.approx([0.026, 0.026])
     assert r.acks_missing == 1

@@ -1,4 +1,4 @@
-"""X-3D serial protocol (``shared/spec/x3d-serial-protocol.md``), byte for byte.
+"""X-3D serial protocol (``docs/protocol.md``), byte for byte.
 
 Modules, bottom up:
 

@@ -1,6 +1,6 @@
 """One interface to the vehicle whichever serial dialect it speaks.
 
-The ground station speaks two dialects: the X-3D's (``spec/x3d-serial-protocol.md``:
+The ground station speaks two dialects: the X-3D's (``docs/protocol.md``:
 configured once, the vehicle pushes DATA) and the AscTec AutoPilot LL's (polled; see
 :mod:`groundstation.asctec.ll`). A dialect is a codec plus a link schedule behind
 :class:`VehicleLink` (as python-can's interfaces sit behind ``BusABC``), chosen by

@@ -45,9 +45,6 @@ from groundstation.asctec.decoder import Ack
 from groundstation.asctec.keepalive import CommandSchedule
 from groundstation.asctec.link import ReceivedData, _link_error, _open_port
 from groundstation.asctec.ll import (
-    ACK_FRAME_SIZE,
-    COMMAND_SIZE,
-    POLL_SIZE,
     ImuRawData,
     LlDecoder,
     LlStatus,
@@ -65,6 +62,10 @@ if TYPE_CHECKING:
     from groundstation.config import SerialConfig
 
 _log = structlog.get_logger("groundstation.asctec")
+
+ACK_MARGIN_S = 0.010
+"""How much longer than the longest recent poll round trip an acknowledgement may take
+before it counts as lost [s]."""
 
 _ANSWER_OF = {PollMask.IMU_RAWDATA: ImuRawData.DESCRIPTOR,
               PollMask.LL_STATUS: LlStatus.DESCRIPTOR, PollMask.RC_DATA: RcData.DESCRIPTOR}
@@ -93,16 +94,16 @@ class PollSchedule:
     then it goes out anyway (the answers of a radio with a round trip longer than the
     period are then pipelined), so the IMU rate holds whatever the latency. Answers and
     acknowledgements come back in order and carry no reference: an answer settles the
-    oldest poll that owes it; an acknowledgement settles the oldest command owed unless a
-    newer one is already old enough to have been answered (older than the shortest poll
-    round trip, adjusted for the bytes on the line, ``byte_time`` [s] each): then the
-    older one's acknowledgement was lost. So a round trip longer than the command period
-    (a radio) and a lost acknowledgement on a fast line are both told apart.
+    oldest poll that owes it; an acknowledgement settles the oldest command owed, and a
+    command older than the longest recent poll round trip plus :data:`ACK_MARGIN_S`
+    (at most ``ack_timeout``) lost its acknowledgement. So a round trip longer than the
+    command period (a radio) needs no guess, and a lost acknowledgement shifts the
+    matching for at most the one command sent right after it.
     """
 
     def __init__(self, period: float, *, status_every: int = 10, rc_every: int = 10,
-                 answer_timeout: float = 0.05, ack_timeout: float = 0.05,
-                 byte_time: float = 10.0 / 57600, history: int = 4096) -> None:
+                 answer_timeout: float = 0.08, ack_timeout: float = 0.08,
+                 history: int = 4096) -> None:
         if not (period > 0 and status_every >= 1 and rc_every >= 1 and answer_timeout > 0
                 and ack_timeout > 0):
             raise ConfigError("poll schedule: period and timeouts > 0, every >= 1 required")
@@ -116,10 +117,6 @@ class PollSchedule:
         self._unacked: deque[float] = deque()
         self.ack_times: deque[float] = deque(maxlen=history)
         self._recent_rtts: deque[float] = deque(maxlen=63)
-        # an acknowledgement's round trip against a poll's: 17 + 5 bytes on the line
-        # instead of 6 + 39 (an IMU_RAWDATA answer)
-        self._ack_minus_poll = byte_time * ((COMMAND_SIZE + ACK_FRAME_SIZE)
-                                            - (POLL_SIZE + ImuRawData.STRUCT.size + 11))
         self.polls_sent = 0
         self.polls_unanswered = 0
         self.acks = 0
@@ -183,24 +180,22 @@ class PollSchedule:
         if not self._unacked:
             self.acks_unexpected += 1
             return
-        shortest = self._shortest_ack_time()
-        while len(self._unacked) > 1 and t - self._unacked[1] >= shortest:
-            self._unacked.popleft()  # a newer command could be the one answered: this
-            self.acks_missing += 1  # one's acknowledgement was lost
         age = t - self._unacked.popleft()
         self.acks += 1
         self.ack_times.append(age)
 
-    def _shortest_ack_time(self) -> float:
-        """The shortest time an acknowledgement can take [s]: the shortest recent poll
-        round trip, less the difference in bytes on the line (a command and an
-        acknowledgement are 22 bytes, a poll and its IMU answer 45); 0 before any."""
+    def _ack_deadline(self) -> float:
+        """How old a command may get before its acknowledgement counts as lost [s]: the
+        longest recent poll round trip plus :data:`ACK_MARGIN_S` (an acknowledgement can
+        wait behind a poll's answers on the line), at most ``ack_timeout``; ``ack_timeout``
+        before any poll was answered."""
         if not self._recent_rtts:
-            return 0.0
-        return max(0.0, min(self._recent_rtts) + self._ack_minus_poll)
+            return self.ack_timeout
+        return min(self.ack_timeout, max(self._recent_rtts) + ACK_MARGIN_S)
 
     def _expire(self, t: float) -> None:
-        while self._unacked and t - self._unacked[0] > self.ack_timeout:
+        deadline = self._ack_deadline()
+        while self._unacked and t - self._unacked[0] > deadline:
             self._unacked.popleft()
             self.acks_missing += 1
         while self._polls and t - self._polls[0].t > self.answer_timeout:
@@ -240,7 +235,7 @@ class LlLink:
     def __init__(self, url: str, *, baudrate: int = 57600, profile: str = DEFAULT_PROFILE,
                  period: float = 0.01, command_rate: float = 50.0, stale_after: float = 0.25,
                  keepalive_slack: float = 0.0, fallback: float = 0.1, status_every: int = 10,
-                 rc_every: int = 10, answer_timeout: float = 0.05, ack_timeout: float = 0.05,
+                 rc_every: int = 10, answer_timeout: float = 0.08, ack_timeout: float = 0.08,
                  rc_map: RcMap = RcMap(), queue_size: int = 256, rate_window: float = 1.0,
                  write_timeout: float = 1.0) -> None:
         profile_init(profile)
@@ -248,8 +243,7 @@ class LlLink:
         self._decoder = LlDecoder(profile)
         self._monitor = DataStreamMonitor(rate_window=rate_window)
         self._polls = PollSchedule(period, status_every=status_every, rc_every=rc_every,
-                                   answer_timeout=answer_timeout, ack_timeout=ack_timeout,
-                                   byte_time=10.0 / baudrate)
+                                   answer_timeout=answer_timeout, ack_timeout=ack_timeout)
         self._commands = CommandSchedule(command_rate=command_rate, stale_after=stale_after,
                                          slack=keepalive_slack, watchdog=fallback)
         self._rc_map = rc_map

@@ -1,7 +1,7 @@
 """IMU sensor scaling: raw 12-bit ADC counts <-> SI (thesis Table 6.2, spec §3.3).
 
 ``SI = K * (count - zero)`` per axis, counts 0..4095, zero 2048 by default
-(``spec/x3d-serial-protocol.md``: the thesis's 0..1023 range cannot hold hover
+(``docs/protocol.md``: the thesis's 0..1023 range cannot hold hover
 gravity at these scales). Body axes FRD; the accelerometer reads specific
 force, about (0, 0, -9.82) m/s^2 at rest (z count ~1163).
 

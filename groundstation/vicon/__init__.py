@@ -1,6 +1,6 @@
 """Vicon Tracker UDP object stream: sans-IO decoder, frame conversion, filter, client.
 
-Data flow (``shared/DESIGN.md``)::
+Data flow::
 
     UDP datagram -> decoder.decode_datagram -> ObjectPose (mm, Euler XYZ)
         -> PoseFilter (lost tracking, plausibility, frames.vicon_to_ned, pose streams with
@@ -8,7 +8,7 @@ Data flow (``shared/DESIGN.md``)::
         -> groundstation.types.Pose (NED m, q scalar first)
 
 Only :class:`ViconClient` touches a socket; everything else is pure and testable
-with bytes. The byte layout is ``shared/spec/vicon-udp.md``; the frame
+with bytes. The byte layout is ``docs/vicon-udp.md``; the frame
 conventions are in :mod:`groundstation.vicon.frames`.
 """
 

@@ -1,4 +1,4 @@
-"""Sans-IO codec for the Vicon Tracker UDP object stream (``spec/vicon-udp.md``).
+"""Sans-IO codec for the Vicon Tracker UDP object stream (``docs/vicon-udp.md``).
 
 One UDP datagram carries one Tracker frame::
 

@@ -1,7 +1,7 @@
 """Health of the Vicon input: measured pose rate, counters, rate-band warnings.
 
 The Vicon rate is measured, never assumed: the lab must fly anywhere from 10 to
-100 Hz and degrade, with a warning, down to 1 Hz (``spec/vicon-udp.md``).
+100 Hz and degrade, with a warning, down to 1 Hz (``docs/vicon-udp.md``).
 :class:`RateMonitor` counts accepted poses in a sliding window and logs a
 structlog warning when the rate leaves the configured band, at most once per
 ``warn_interval_s``. Sans-IO: every method takes the current monotonic time.
