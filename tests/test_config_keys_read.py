@@ -6,7 +6,9 @@ Reads of configuration fields are recorded (``ConfigModel.__getattribute__`` wra
 the ground station does what a configuration drives: the flight core for every controller
 type, a short real-time flight of the daemon against the virtual lab over a pty and UDP
 (serial link, Vicon, telemetry, flight log, real-time settings), ``gs synth hinf`` (the
-H-infinity design keys) and the virtual lab's parameters (the vehicle it simulates). The
+H-infinity design keys), the control socket with CURVE keys, the virtual lab's parameters
+(the vehicle it simulates), and in the AscTec LL dialect the flight core, the lab and
+``gs motors start`` over its link (the ``serial.ll`` keys). The
 configurations are built before recording starts, so a key that only a validator looks at
 counts as unread. The ``sim:`` section has its own test (``test_sim_config_keys.py``), which
 also shows each of its keys changing the lab.
@@ -36,6 +38,7 @@ from groundstation.config import (
 )
 from groundstation.loop.core import FlightCore
 from groundstation.loop.daemon import FlightDaemon
+from groundstation.loop.motors import motor_gesture_command
 from groundstation.telemetry.control import ControlServer
 from sim_device.params import LabParams
 from sim_device.realtime import SimDeviceProcess
@@ -118,6 +121,16 @@ def _fly_briefly(cfg: GroundStationConfig, tmp_path: Path) -> int:
     return out["exit"]
 
 
+def _motors(cfg: GroundStationConfig, tmp_path: Path) -> int:
+    """`gs motors start` against the virtual AscTec LL vehicle (reads the link's and the
+    gesture's keys)."""
+    cfg_file = tmp_path / "ll.yaml"
+    cfg_file.write_text(dump_config(cfg), encoding="utf-8")
+    with SimDeviceProcess(cfg_file, tmp_path / "ll-truth.npz") as device:
+        return motor_gesture_command(apply_overrides(cfg, {"serial.port": device.pty_path}),
+                                     start=True, echo=lambda _line: None)
+
+
 @pytest.mark.slow
 def test_every_configuration_key_is_read(tmp_path: Path) -> None:
     base = apply_overrides(load_config(ROOT / "config" / "sim.yaml"), {
@@ -135,6 +148,7 @@ def test_every_configuration_key_is_read(tmp_path: Path) -> None:
     zmq.auth.create_certificates(str(keys / "clients"), "client")
     curve = apply_overrides(base, {"telemetry.control_server_key": server_secret,
                                    "telemetry.control_client_keys": str(keys / "clients")})
+    ll = apply_overrides(base, {"serial.protocol": "asctec-ll"})
     hinf_file = tmp_path / "hinf.yaml"
     hinf_file.write_text(dump_config(base), encoding="utf-8")
     steps: dict[str, Callable[[], object]] = {
@@ -145,6 +159,9 @@ def test_every_configuration_key_is_read(tmp_path: Path) -> None:
                   str(tmp_path / "g.npz")]),
         "control socket with CURVE": lambda: ControlServer.from_config(curve.telemetry).close(),
         "real-time flight": lambda: _fly_briefly(base, tmp_path),
+        "flight core (asctec-ll)": lambda: FlightCore(ll),
+        "virtual lab parameters (asctec-ll)": lambda: LabParams.from_config(ll),
+        "gs motors start (asctec-ll)": lambda: _motors(ll, tmp_path),
     }
     reads: set[Read] = set()
     results = {}
@@ -152,5 +169,6 @@ def test_every_configuration_key_is_read(tmp_path: Path) -> None:
         for name, step in steps.items():
             results[name] = step()
     assert results["real-time flight"] == 0  # a completed mission, so every stage ran
+    assert results["gs motors start (asctec-ll)"] == 0  # the gesture ran to its end
     assert results["gs synth hinf"].exit_code == 0  # type: ignore[attr-defined]
     assert unread(reads) == []
