@@ -187,3 +187,28 @@ def test_real_time_flight_in_the_asctec_ll_dialect(tmp_path: Path) -> None:
     hovering = truth["ctrl_mask"] == 0xF
     assert -truth["position"][hovering, 2].min() > 0.9
     assert truth["on_ground"][-1] and truth["ctrl_mask"][-1] == 0
+
+
+@pytest.mark.slow
+def test_an_ll_vehicle_that_stops_answering_polls_is_link_loss(tmp_path: Path) -> None:
+    """The virtual LL vehicle stops answering polls in the air (its commands still reach
+    it): the daemon stops at link loss, never flies blind, and the vehicle's fallback
+    hands every channel back to the pilot."""
+    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {
+        "serial.protocol": "asctec-ll", "trajectory.name": "hover",
+        "vicon.port": free_udp_port(), "telemetry.endpoint": "tcp://127.0.0.1:*",
+        "logging.flight_log_dir": str(tmp_path), "telemetry.control_endpoint": None,
+        "sim.truth_file": str(tmp_path / "truth.npz"),
+        "sim.faults.stall_at_s": 9.0, "sim.faults.stall_duration_s": 30.0,
+    })
+    cfg_file = tmp_path / "lab.yaml"
+    cfg_file.write_text(dump_config(cfg), encoding="utf-8")
+    with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as device:
+        summary = FlightDaemon(apply_overrides(cfg, {"serial.port": device.pty_path}),
+                               duration_s=30.0).run()
+        time.sleep(0.3)
+    assert summary.final_state is State.LINK_LOST and not summary.success
+    assert summary.transitions[-1].failsafe
+    truth = np.load(tmp_path / "truth.npz")
+    assert truth["ctrl_mask"][-1] == 0  # the fallback gave the pilot the vehicle
+    assert (truth["ctrl_mask"] == 0xF).any()  # it was flying on our commands before
