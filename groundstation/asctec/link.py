@@ -31,7 +31,7 @@ import time
 from collections import deque
 from dataclasses import dataclass
 from types import TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Self
 
 import serial
 import structlog
@@ -83,7 +83,96 @@ def _open_port(url: str, baudrate: int, read_timeout: float, write_timeout: floa
         raise LinkError(f"cannot open serial port {url!r}: {exc}") from exc
 
 
-class SerialLink:
+class PortLink:
+    """What the links of both dialects share: the exclusively opened port, a reader thread
+    that hands every chunk to :meth:`_on_bytes`, background failures stored and re-raised,
+    the context manager. ``_cond`` guards the subclass's state and wakes its waiters.
+
+    url : device path or pyserial URL; baudrate [baud]; write_timeout [s]; name : the
+    threads' name prefix. Raises LinkError if the port cannot be opened. The subclass
+    starts the reader (:meth:`_start_reader`) once its decoder is in place.
+    """
+
+    READ_TIMEOUT = 0.05
+    """Longest a read blocks; bounds how long closing waits for the reader [s]."""
+
+    def __init__(self, url: str, baudrate: int, write_timeout: float, name: str) -> None:
+        self.url = url
+        self._cond = threading.Condition()
+        self._error: LinkError | None = None
+        self._closed = False
+        self._stop = threading.Event()
+        self._port = _open_port(url, baudrate, self.READ_TIMEOUT, write_timeout)
+        self._reader = threading.Thread(target=self._read_loop, name=f"{name}-reader {url}",
+                                        daemon=True)
+
+    @property
+    def error(self) -> LinkError | None:
+        """The failure of a background thread, if any (the link is then unusable)."""
+        return self._error
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the link (the subclass hands back first); idempotent, never raises."""
+        self._close_port()
+
+    def _start_reader(self) -> None:
+        self._reader.start()
+
+    def _on_bytes(self, chunk: bytes, t: float) -> None:
+        """Decode ``chunk`` received at monotonic ``t`` [s] (the subclass's job)."""
+        raise NotImplementedError
+
+    def _check_usable(self) -> None:
+        """Raise the stored background failure, or LinkError if closed."""
+        if self._error is not None:
+            raise LinkError(f"serial link {self.url!r} failed: {self._error}") from self._error
+        if self._closed:
+            raise LinkError(f"serial link {self.url!r} is closed")
+
+    def _fail(self, error: LinkError) -> None:
+        """Store a background failure and wake every waiter."""
+        with self._cond:
+            if self._error is None:
+                self._error = error
+            self._cond.notify_all()
+        _log.error("serial link failed", url=self.url, error=str(error))
+
+    def _read_loop(self) -> None:
+        """Reader thread: read whatever is waiting and hand it to :meth:`_on_bytes`."""
+        port = self._port
+        try:
+            while not self._stop.is_set():
+                chunk = port.read(port.in_waiting or 1)
+                if chunk:
+                    self._on_bytes(chunk, time.monotonic())
+        except Exception as exc:  # any failure must surface to the user, never vanish
+            if not self._stop.is_set():
+                self._fail(_link_error(f"read from {self.url!r} failed", exc))
+
+    def _close_port(self) -> None:
+        """Stop the reader, close the port and wake every waiter (never raises)."""
+        self._stop.set()
+        cancel = getattr(self._port, "cancel_read", None)
+        if cancel is not None:
+            cancel()
+        if self._reader.is_alive():
+            self._reader.join()
+        try:
+            self._port.close()
+        except (serial.SerialException, OSError) as exc:
+            _log.warning("closing the serial port failed", url=self.url, error=str(exc))
+        with self._cond:
+            self._cond.notify_all()
+
+
+class SerialLink(PortLink):
     """Serial link to the X-3D: DATA in (queued, timestamped), any message out.
 
     Parameters
@@ -105,9 +194,6 @@ class SerialLink:
     Raises LinkError if the port cannot be opened, ConfigError for bad parameters.
     """
 
-    READ_TIMEOUT = 0.05
-    """Longest a read blocks; bounds how long closing waits for the reader [s]."""
-
     def __init__(
         self,
         url: str,
@@ -125,31 +211,24 @@ class SerialLink:
         if queue_size < 1:
             raise ConfigError(f"queue_size must be >= 1, got {queue_size}")
         profile_init(profile)  # validates the name before opening anything
-        self.url = url
         self._profile = profile
         self._decoder = StreamDecoder(profile)
         self._monitor = DataStreamMonitor(rate_window=rate_window)
         self._schedule = CommandSchedule(command_rate=command_rate, stale_after=stale_after,
                                          slack=keepalive_slack)
         self._queue: deque[ReceivedData] = deque(maxlen=queue_size)
-        self._cond = threading.Condition()  # guards queue, decoder, monitor, counters
         self._write_lock = threading.Lock()  # serialises writes and the schedule
         self._queue_dropped = 0
         self._unexpected = 0
         self._stream = stream
         self._bytes_out = 0
-        self._error: LinkError | None = None
         self._flew = False
-        self._closed = False
         self._close_lock = threading.Lock()
-        self._stop = threading.Event()
         self._keepalive_stop = threading.Event()
         self._keepalive: threading.Thread | None = None
-        self._port = _open_port(url, baudrate, self.READ_TIMEOUT, write_timeout)
-        self._reader = threading.Thread(
-            target=self._read_loop, name=f"x3d-reader {url}", daemon=True
-        )
-        self._reader.start()
+        # the port opens here; the queue, decoder, monitor and counters are under _cond
+        super().__init__(url, baudrate, write_timeout, "x3d")
+        self._start_reader()
 
     @classmethod
     def from_config(cls, config: SerialConfig) -> SerialLink:
@@ -174,11 +253,6 @@ class SerialLink:
         )
 
     # --- user API -----------------------------------------------------------------
-
-    @property
-    def error(self) -> LinkError | None:
-        """The failure of a background thread, if any (the link is then unusable)."""
-        return self._error
 
     @property
     def flew(self) -> bool:
@@ -305,45 +379,9 @@ class SerialLink:
                     )
             except LinkError as exc:
                 _log.warning("final mask-0 COMMAND not sent", url=self.url, error=str(exc))
-        self._stop.set()
-        cancel = getattr(self._port, "cancel_read", None)
-        if cancel is not None:
-            cancel()
-        self._reader.join()
-        try:
-            self._port.close()
-        except (serial.SerialException, OSError) as exc:
-            _log.warning("closing the serial port failed", url=self.url, error=str(exc))
-        with self._cond:
-            self._cond.notify_all()
-
-    def __enter__(self) -> SerialLink:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
+        self._close_port()
 
     # --- internals ----------------------------------------------------------------
-
-    def _check_usable(self) -> None:
-        """Raise the stored background failure, or LinkError if closed."""
-        if self._error is not None:
-            raise LinkError(f"serial link {self.url!r} failed: {self._error}") from self._error
-        if self._closed:
-            raise LinkError(f"serial link {self.url!r} is closed")
-
-    def _fail(self, error: LinkError) -> None:
-        """Store a background failure and wake every waiter."""
-        with self._cond:
-            if self._error is None:
-                self._error = error
-            self._cond.notify_all()
-        _log.error("serial link failed", url=self.url, error=str(error))
 
     def _write(self, frame: bytes) -> float:
         """Write ``frame`` (caller holds the write lock); returns the write time [s]."""
@@ -355,18 +393,6 @@ class SerialLink:
             raise error from exc
         self._bytes_out += len(frame)
         return time.monotonic()
-
-    def _read_loop(self) -> None:
-        """Reader thread: read whatever is waiting, decode, queue DATA."""
-        port = self._port
-        try:
-            while not self._stop.is_set():
-                chunk = port.read(port.in_waiting or 1)
-                if chunk:
-                    self._on_bytes(chunk, time.monotonic())
-        except Exception as exc:  # any failure must surface to the user, never vanish
-            if not self._stop.is_set():
-                self._fail(_link_error(f"read from {self.url!r} failed", exc))
 
     def _on_bytes(self, chunk: bytes, t: float) -> None:
         """Decode ``chunk`` received at ``t`` and queue its DATA messages."""

@@ -34,7 +34,6 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from types import TracebackType
 from typing import TYPE_CHECKING
 
 import structlog
@@ -43,7 +42,7 @@ from groundstation.asctec.blocks import AxisCounts, RcBlock, StatusBlock
 from groundstation.asctec.crc import DEFAULT_PROFILE, profile_init
 from groundstation.asctec.decoder import Ack
 from groundstation.asctec.keepalive import CommandSchedule
-from groundstation.asctec.link import ReceivedData, _link_error, _open_port
+from groundstation.asctec.link import PortLink, ReceivedData, _link_error
 from groundstation.asctec.ll import (
     ImuRawData,
     LlDecoder,
@@ -225,12 +224,9 @@ def _stick(value: int) -> int:
     return min(max(value - 2048, -2048), 2047)
 
 
-class LlLink:
+class LlLink(PortLink):
     """Serial link to an AscTec LL vehicle with :class:`~groundstation.asctec.link.SerialLink`'s
     interface (see the module docstring). Raises LinkError if the port cannot be opened."""
-
-    READ_TIMEOUT = 0.05
-    """Longest a read blocks; bounds how long closing waits for the reader [s]."""
 
     def __init__(self, url: str, *, baudrate: int = 57600, profile: str = DEFAULT_PROFILE,
                  period: float = 0.01, command_rate: float = 50.0, stale_after: float = 0.25,
@@ -239,7 +235,6 @@ class LlLink:
                  rc_map: RcMap = RcMap(), queue_size: int = 256, rate_window: float = 1.0,
                  write_timeout: float = 1.0) -> None:
         profile_init(profile)
-        self.url = url
         self._decoder = LlDecoder(profile)
         self._monitor = DataStreamMonitor(rate_window=rate_window)
         self._polls = PollSchedule(period, status_every=status_every, rc_every=rc_every,
@@ -249,7 +244,6 @@ class LlLink:
         self._rc_map = rc_map
         self._repeats = RepeatCounter()
         self._queue: deque[ReceivedData] = deque(maxlen=queue_size)
-        self._lock = threading.Condition()  # schedules, decoder, queue, writes, counters
         self._status: LlStatus | None = None
         self._status_t = -float("inf")
         self._rc: RcData | None = None
@@ -258,17 +252,13 @@ class LlLink:
         self._last_ctrl = 0
         self._armed = False
         self._flew = False
-        self._closed = False
-        self._error: LinkError | None = None
         self._queue_dropped = 0
         self._bytes_out = 0
-        self._stop = threading.Event()
-        self._port = _open_port(url, baudrate, self.READ_TIMEOUT, write_timeout)
-        self._reader = threading.Thread(target=self._read_loop, name=f"ll-reader {url}",
-                                        daemon=True)
+        # the port opens here; _cond guards schedules, decoder, queue, writes, counters
+        super().__init__(url, baudrate, write_timeout, "ll")
         self._writer = threading.Thread(target=self._write_loop, name=f"ll-writer {url}",
                                         daemon=True)
-        self._reader.start()
+        self._start_reader()
         self._writer.start()
 
     @classmethod
@@ -288,11 +278,6 @@ class LlLink:
     # --- the VehicleLink interface --------------------------------------------------
 
     @property
-    def error(self) -> LinkError | None:
-        """The failure of a background thread, if any (the link is then unusable)."""
-        return self._error
-
-    @property
     def flew(self) -> bool:
         """True once a command with a non-zero ctrl mask was written."""
         return self._flew
@@ -305,15 +290,15 @@ class LlLink:
     def start_stream(self) -> None:
         """Start polling (the LL vehicle sends nothing unpolled); idempotent."""
         self._check_usable()
-        with self._lock:
+        with self._cond:
             self._polls.start(time.monotonic())
-            self._lock.notify_all()
+            self._cond.notify_all()
 
     def get(self, timeout: float) -> ReceivedData | None:
         """The oldest queued IMU sample, waiting up to ``timeout`` [s]; None on timeout.
         Raises LinkError if the link failed or is closed."""
         deadline = time.monotonic() + timeout
-        with self._lock:
+        with self._cond:
             while True:
                 self._check_usable()
                 if self._queue:
@@ -321,7 +306,7 @@ class LlLink:
                 remaining = deadline - time.monotonic()
                 if remaining <= 0.0:
                     return None
-                self._lock.wait(remaining)
+                self._cond.wait(remaining)
 
     def send(self, msg: Message) -> None:
         """Write a command now (``>*>di``); it also becomes the keep-alive's command.
@@ -330,47 +315,47 @@ class LlLink:
             raise ConfigError(f"the AscTec LL dialect has no {type(msg).__name__}: only "
                               "commands are sent (the data stream is polled)")
         self._check_usable()
-        with self._lock:
+        with self._cond:
             t = self._write_command(msg)
             self._commands.loop_command(msg, t)
 
     def arm(self) -> None:
         """Start the keep-alive guarantee (no-op if armed)."""
         self._check_usable()
-        with self._lock:
+        with self._cond:
             if not self._armed:
                 self._armed = True
                 self._commands.arm(time.monotonic())
-                self._lock.notify_all()
+                self._cond.notify_all()
 
     def disarm(self) -> None:
         """Stop the keep-alive and send a command with ctrl mask 0."""
-        with self._lock:
+        with self._cond:
             self._armed = False
             self._commands.disarm()
         self.send(CommandMsg.release())
 
     def command_write_times(self) -> tuple[float, ...]:
         """Monotonic times [s] of the most recent command writes, oldest first."""
-        with self._lock:
+        with self._cond:
             return self._commands.write_times()
 
     def wait_status(self, timeout: float, newer_than: float = -float("inf")) -> LlStatus | None:
         """The vehicle's last LL_STATUS received after ``newer_than`` (monotonic [s]),
         waiting up to ``timeout`` [s] for one; None if none came (polling must run)."""
         deadline = time.monotonic() + timeout
-        with self._lock:
+        with self._cond:
             while self._status is None or self._status_t <= newer_than:
                 self._check_usable()
                 remaining = deadline - time.monotonic()
                 if remaining <= 0.0:
                     return None
-                self._lock.wait(remaining)
+                self._cond.wait(remaining)
             return self._status
 
     def stats(self) -> LinkStats:
         """A consistent snapshot of the link's counters."""
-        with self._lock:
+        with self._cond:
             counts = self._decoder.counts()
             m, p, c = self._monitor, self._polls, self._commands
             return LinkStats(
@@ -387,7 +372,7 @@ class LlLink:
     def close(self) -> None:
         """Stop polling and the keep-alive, send a final mask-0 command if this link flew
         the vehicle, stop the threads, close the port. Idempotent; never raises."""
-        with self._lock:
+        with self._cond:
             if self._closed:
                 return
             self._closed = True
@@ -399,38 +384,11 @@ class LlLink:
                 except LinkError as exc:
                     _log.warning("final mask-0 command not sent", url=self.url, error=str(exc))
             self._stop.set()
-            self._lock.notify_all()
-        cancel = getattr(self._port, "cancel_read", None)
-        if cancel is not None:
-            cancel()
+            self._cond.notify_all()
         self._writer.join()
-        self._reader.join()
-        try:
-            self._port.close()
-        except OSError as exc:
-            _log.warning("closing the serial port failed", url=self.url, error=str(exc))
-
-    def __enter__(self) -> LlLink:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
+        self._close_port()
 
     # --- internals ------------------------------------------------------------------
-
-    def _check_usable(self) -> None:
-        if self._error is not None:
-            raise LinkError(f"serial link {self.url!r} failed: {self._error}") from self._error
-        if self._closed:
-            raise LinkError(f"serial link {self.url!r} is closed")
-
-    def _fail(self, error: LinkError) -> None:
-        with self._lock:
-            if self._error is None:
-                self._error = error
-            self._lock.notify_all()
-        _log.error("serial link failed", url=self.url, error=str(error))
 
     def _write(self, data: bytes) -> float:
         """Write ``data`` (caller holds the lock); returns the write time [s]."""
@@ -439,7 +397,7 @@ class LlLink:
         except Exception as exc:
             error = _link_error(f"write to {self.url!r} failed", exc)
             self._error = self._error or error
-            self._lock.notify_all()
+            self._cond.notify_all()
             raise error from exc
         self._bytes_out += len(data)
         return time.monotonic()
@@ -455,7 +413,7 @@ class LlLink:
     def _write_loop(self) -> None:
         """Writer thread: polls on the schedule, keep-alive commands while armed."""
         try:
-            with self._lock:
+            with self._cond:
                 while not self._stop.is_set():
                     now = time.monotonic()
                     mask = self._polls.poll_due(now)
@@ -470,24 +428,13 @@ class LlLink:
                                              else None) if d is not None]
                     wait = min(deadlines) - time.monotonic() if deadlines else 0.1
                     if wait > 0:
-                        self._lock.wait(wait)
+                        self._cond.wait(wait)
         except Exception as exc:  # any failure must surface to the user, never vanish
             if not self._stop.is_set():
                 self._fail(_link_error(f"polling {self.url!r} failed", exc))
 
-    def _read_loop(self) -> None:
-        port = self._port
-        try:
-            while not self._stop.is_set():
-                chunk = port.read(port.in_waiting or 1)
-                if chunk:
-                    self._on_bytes(chunk, time.monotonic())
-        except Exception as exc:  # any failure must surface to the user, never vanish
-            if not self._stop.is_set():
-                self._fail(_link_error(f"read from {self.url!r} failed", exc))
-
     def _on_bytes(self, chunk: bytes, t: float) -> None:
-        with self._lock:
+        with self._cond:
             for item in self._decoder.feed(chunk):
                 if isinstance(item, Ack):
                     self._polls.acked(t)
@@ -501,7 +448,7 @@ class LlLink:
                 elif isinstance(item, RcData):
                     self._polls.answered(item.DESCRIPTOR, t)
                     self._rc, self._new_rc = item, True
-            self._lock.notify_all()  # the turn may have come back to the host
+            self._cond.notify_all()  # the turn may have come back to the host
 
     def _queue_sample(self, t: float, raw: ImuRawData) -> None:
         counter = self._repeats.update(raw.values())
