@@ -42,6 +42,9 @@ identify_app = typer.Typer(help="Identify model parameters from measurement CSVs
 app.add_typer(identify_app, name="identify")
 synth_app = typer.Typer(help="Synthesise controller gains.", no_args_is_help=True)
 app.add_typer(synth_app, name="synth")
+calibrate_app = typer.Typer(help="Calibrate a vehicle at rest: IMU zeros and noise, Vicon.",
+                            no_args_is_help=True)
+app.add_typer(calibrate_app, name="calibrate")
 
 ConfigOption = Annotated[Path, typer.Option("--config", "-c", help="YAML configuration file.")]
 
@@ -330,6 +333,91 @@ def identify_inflow(
     except IdentificationError as exc:
         raise _fail(str(exc), 2) from exc
     typer.echo(fit.report())
+
+
+SerialPortOption = Annotated[str | None, typer.Option(help="Serial device or URL.")]
+ViconPortOption = Annotated[int | None, typer.Option(help="Vicon UDP port.")]
+ViconObjectOption = Annotated[str | None, typer.Option(help="Vicon object name.")]
+ProtocolOption = Annotated[str | None, typer.Option(
+    help="The vehicle's serial dialect: x3d|asctec-ll (serial.protocol).")]
+SecondsOption = Annotated[float, typer.Option(min=1.0, help="Measurement length [s].")]
+JsonOption = Annotated[bool, typer.Option(
+    "--json", help="Print one JSON object keyed by the configuration's field names.")]
+OutOption = Annotated[Path, typer.Option(help="Directory for the figure.")]
+
+
+def _report_calibration(result: Any, name: str, out: Path, as_json: bool) -> None:
+    """Print a calibration (summary and YAML to paste, or JSON) and write its figure."""
+    import json
+
+    import yaml
+
+    figure: Path | None = None
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        figure = result.figure(out / f"{name}.png")
+    except GroundStationError as exc:  # matplotlib missing: the numbers still count
+        typer.echo(f"no figure: {exc}", err=True)
+    fields = result.config_fields()
+    if as_json:
+        typer.echo(json.dumps({**fields, "samples": result.samples, "seconds": result.seconds,
+                               "figure": str(figure) if figure else None}))
+        return
+    typer.echo(result.summary())
+    nested: dict[str, Any] = {}
+    for key, value in fields.items():
+        if "." in key:
+            section, leaf = key.split(".", 1)
+            nested.setdefault(section, {})[leaf] = value
+    typer.echo("\npaste into the configuration:\n" + yaml.safe_dump(nested, sort_keys=False))
+    if figure is not None:
+        typer.echo(f"figure: {figure}")
+
+
+@calibrate_app.command("imu")
+def calibrate_imu_command(
+    config: ConfigOption, seconds: SecondsOption = 10.0, serial_port: SerialPortOption = None,
+    vicon_port: ViconPortOption = None, vicon_object: ViconObjectOption = None,
+    protocol: ProtocolOption = None, as_json: JsonOption = False, out: OutOption = Path("."),
+    vicon: Annotated[bool, typer.Option(
+        help="Fit the accelerometer to the Vicon attitude (else: the vehicle is level).")] = True,
+) -> None:
+    """Gyro and accelerometer zeros [counts] and noise variances (Table 6.3), vehicle at rest.
+
+    The link is up but nothing is commanded (the vehicle stays the pilot's). Refused if
+    the vehicle moves. Exit 1 if it cannot measure, 2 on a usage error.
+    """
+    from groundstation.calibration import calibrate_imu
+
+    cfg = load(config, {"serial.port": serial_port, "vicon.port": vicon_port,
+                        "vicon.object_name": vicon_object, "serial.protocol": protocol})
+    try:
+        result = calibrate_imu(cfg, seconds, use_vicon=vicon)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 1) from exc
+    _report_calibration(result, "calibrate-imu", out, as_json)
+
+
+@calibrate_app.command("vicon")
+def calibrate_vicon_command(
+    config: ConfigOption, seconds: SecondsOption = 10.0, vicon_port: ViconPortOption = None,
+    vicon_object: ViconObjectOption = None, as_json: JsonOption = False,
+    out: OutOption = Path("."),
+) -> None:
+    """Vicon noise (Table 6.1), stream rate, jitter and dropped frames, and a frame check.
+
+    Place the vehicle level with its nose along the lab's +x: if world_to_ned or
+    body_to_object is wrong, the rotation that fixes it is suggested. Exit 1 if it
+    cannot measure, 2 on a usage error.
+    """
+    from groundstation.calibration import calibrate_vicon
+
+    cfg = load(config, {"vicon.port": vicon_port, "vicon.object_name": vicon_object})
+    try:
+        result = calibrate_vicon(cfg, seconds)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 1) from exc
+    _report_calibration(result, "calibrate-vicon", out, as_json)
 
 
 @synth_app.command("hinf")

@@ -1,0 +1,170 @@
+"""`gs calibrate imu` and `gs calibrate vicon` against the virtual lab (issue 17).
+
+The virtual vehicle runs in its own process, in real time over a pty and UDP, with
+planted values that differ from the defaults the ground station's configuration holds:
+gyro and accelerometer biases (so the true zeros are off 2048), noise variances four
+and nine times Table 6.3's, Vicon noise and rate, and a wrong ``vicon.body_to_object``
+on the ground station's side. The commands must recover the planted truth (zeros within
+1 count, variances within 20 %, rate within 2 %) and refuse a moving vehicle.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.model.sensors import (
+    ACC_VARIANCE_TABLE_6_3,
+    GYRO_VARIANCE_TABLE_6_3,
+    VICON_POSITION_VARIANCE_TABLE_6_1,
+    VICON_QUATERNION_VARIANCE_TABLE_6_1,
+)
+from sim_device.realtime import SimDeviceProcess
+
+ROOT = Path(__file__).resolve().parents[1]
+GYRO_BIAS = (0.05, -0.03, 0.02)  # rad/s
+ACC_BIAS = (0.2, -0.1, 0.15)  # m/s^2
+GYRO_VAR = tuple(4 * v for v in GYRO_VARIANCE_TABLE_6_3)
+ACC_VAR = tuple(2 * v for v in ACC_VARIANCE_TABLE_6_3)
+# (a larger accelerometer noise would need a longer measurement for a zero within 1 count:
+# its standard error is sigma / sqrt(n) counts, about 0.3 counts here)
+VICON_POS_VAR = tuple(25 * v for v in VICON_POSITION_VARIANCE_TABLE_6_1)
+VICON_Q_VAR = tuple(16 * v for v in VICON_QUATERNION_VARIANCE_TABLE_6_1)
+VICON_RATE = 80.0
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def gs(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "groundstation", *args], capture_output=True,
+                          text=True, timeout=90, cwd=ROOT)
+
+
+IMU_PLANTED: dict[str, object] = {
+    "sim.gyro_bias": list(GYRO_BIAS), "sim.acc_bias": list(ACC_BIAS), "sim.scale_error": 0.0,
+    "vehicle.gyro_variance": list(GYRO_VAR), "vehicle.acc_variance": list(ACC_VAR)}
+VICON_PLANTED: dict[str, object] = {
+    "vehicle.vicon_position_variance": list(VICON_POS_VAR),
+    "vehicle.vicon_quaternion_variance": list(VICON_Q_VAR), "sim.vicon.rate_hz": VICON_RATE}
+
+
+def planted_lab(ground: GroundStationConfig, extra: dict[str, object]) -> GroundStationConfig:
+    """The virtual vehicle's configuration: the ground station's plus the planted values."""
+    return apply_overrides(ground, {**IMU_PLANTED, **extra})
+
+
+@pytest.fixture
+def lab(request: pytest.FixtureRequest,
+        tmp_path: Path) -> Iterator[tuple[Path, GroundStationConfig]]:
+    """(the ground station's configuration file, the lab's configuration), lab running.
+    The IMU's planted values always; Vicon's for the Vicon test (its 16-fold attitude
+    noise would blur the attitude the accelerometer's zero is fitted to)."""
+    ground = apply_overrides(load_config(ROOT / "config" / "sim.yaml"),
+                             {"vicon.port": free_udp_port()})
+    lab_cfg = planted_lab(ground, VICON_PLANTED if request.param == "vicon" else {})
+    lab_file = tmp_path / "lab.yaml"
+    lab_file.write_text(dump_config(lab_cfg), encoding="utf-8")
+    with SimDeviceProcess(lab_file, tmp_path / "truth.npz") as device:
+        ground_file = tmp_path / "ground.yaml"
+        ground_file.write_text(dump_config(apply_overrides(
+            ground, {"serial.port": device.pty_path})), encoding="utf-8")
+        yield ground_file, lab_cfg
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("lab", ["imu"], indirect=True)
+def test_calibrate_imu_recovers_the_planted_zeros_and_noise(
+        lab: tuple[Path, GroundStationConfig], tmp_path: Path) -> None:
+    ground_file, lab_cfg = lab
+    out = gs("calibrate", "imu", "--config", str(ground_file), "--seconds", "15", "--json",
+             "--out", str(tmp_path))
+    assert out.returncode == 0, out.stdout + out.stderr
+    got = json.loads(out.stdout)
+    k_gyro = np.asarray(lab_cfg.vehicle.gyro_scale)
+    k_acc = np.asarray(lab_cfg.vehicle.acc_scale)
+    # counts = zero + (truth + bias) / K: at rest the gyro truth is 0 and the
+    # accelerometer's is the specific force of rest, which the fit takes out
+    np.testing.assert_allclose(got["vehicle.gyro_zero"], 2048 + np.asarray(GYRO_BIAS) / k_gyro,
+                               atol=1.0)
+    np.testing.assert_allclose(got["vehicle.acc_zero"], 2048 + np.asarray(ACC_BIAS) / k_acc,
+                               atol=1.0)
+    np.testing.assert_allclose(got["vehicle.gyro_variance"], GYRO_VAR, rtol=0.2)
+    np.testing.assert_allclose(got["vehicle.acc_variance"], ACC_VAR, rtol=0.2)
+    assert got["samples"] > 1300
+    assert (tmp_path / "calibrate-imu.png").stat().st_size > 10_000
+    human = gs("calibrate", "imu", "--config", str(ground_file), "--seconds", "2",
+               "--out", str(tmp_path))
+    assert human.returncode == 0
+    assert "paste into the configuration" in human.stdout and "gyro_zero:" in human.stdout
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("lab", ["vicon"], indirect=True)
+def test_calibrate_vicon_recovers_the_noise_and_finds_a_wrong_frame(
+        lab: tuple[Path, GroundStationConfig], tmp_path: Path) -> None:
+    ground_file, _ = lab
+    out = gs("calibrate", "vicon", "--config", str(ground_file), "--seconds", "10", "--json",
+             "--out", str(tmp_path))
+    assert out.returncode == 0, out.stdout + out.stderr
+    got = json.loads(out.stdout)
+    np.testing.assert_allclose(got["vehicle.vicon_position_variance"], VICON_POS_VAR, rtol=0.2)
+    # q1..q3 carry the attitude noise; q0 = cos(angle / 2) is second order near identity
+    np.testing.assert_allclose(got["vehicle.vicon_quaternion_variance"][1:], VICON_Q_VAR[1:],
+                               rtol=0.2)
+    assert got["vicon.expected_rate_hz"] == pytest.approx(VICON_RATE, rel=0.02)
+    assert got["frames_dropped"] == 0 and got["frames_ok"]
+    # the same lab seen through a wrong body_to_object (identity instead of 180 deg about x)
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text(dump_config(apply_overrides(load_config(ground_file), {
+        "vicon.body_to_object.euler_xyz_deg": [0.0, 0.0, 0.0]})), encoding="utf-8")
+    bad = gs("calibrate", "vicon", "--config", str(wrong), "--seconds", "2", "--json",
+             "--out", str(tmp_path))
+    assert bad.returncode == 0, bad.stderr
+    check = json.loads(bad.stdout)
+    assert not check["frames_ok"] and check["attitude_error_deg"] == pytest.approx(180, abs=2)
+    suggested = check["vicon.body_to_object"]["euler_xyz_deg"]
+    from scipy.spatial.transform import Rotation
+
+    assert Rotation.from_euler("XYZ", suggested, degrees=True).as_matrix() == pytest.approx(
+        Rotation.from_euler("XYZ", [180, 0, 0], degrees=True).as_matrix(), abs=0.03)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("pilot_thrust", "position", "what"), [
+    (2050, [0.0, 0.0, 0.0], "Vicon position drifted"),  # the pilot lifts it off slowly
+    (0, [0.0, 0.0, -150.0], "accelerometer reads"),  # falling (5.5 s), above the volume
+])
+def test_a_moving_vehicle_is_refused(tmp_path: Path, pilot_thrust: int, position: list[float],
+                                     what: str) -> None:
+    ground = apply_overrides(load_config(ROOT / "config" / "sim.yaml"),
+                             {"vicon.port": free_udp_port()})
+    lab_cfg = planted_lab(ground, {"sim.initial_position": position,
+                                   "sim.pilot_thrust": pilot_thrust})
+    lab_file = tmp_path / "lab.yaml"
+    lab_file.write_text(dump_config(lab_cfg), encoding="utf-8")
+    with SimDeviceProcess(lab_file, tmp_path / "truth.npz") as device:
+        ground_file = tmp_path / "ground.yaml"
+        ground_file.write_text(dump_config(apply_overrides(
+            ground, {"serial.port": device.pty_path})), encoding="utf-8")
+        out = gs("calibrate", "imu", "--config", str(ground_file), "--seconds", "1.5")
+    assert out.returncode == 1, out.stdout
+    assert "not at rest" in out.stderr or "moved during the measurement" in out.stderr
+    assert what in out.stderr
+
+
+def test_no_vehicle_is_a_clear_error(tmp_path: Path) -> None:
+    out = gs("calibrate", "imu", "--config", str(ROOT / "config" / "sim.yaml"),
+             "--serial-port", str(tmp_path / "no-such-port"), "--seconds", "1")
+    assert out.returncode == 1 and "no-such-port" in out.stderr and "Traceback" not in out.stderr
