@@ -58,6 +58,8 @@ def make_tick(rng: np.random.Generator, k: int) -> dict[str, Any]:
         compute_time=rng.random() * 1e-3, jitter=rng.normal() * 1e-4, latency=rng.random() * 1e-2,
         battery_v=11.8 - 1e-3 * k, vehicle_flags=int(rng.integers(0, 8)),
         vehicle_mask=int(rng.integers(0, 16)), pilot_enabled=bool(k % 5),
+        pilot=None if k % 6 == 0 else Sticks(
+            *(int(v) for v in rng.integers(-2048, 2048, 3)), int(rng.integers(0, 4097))),
     )
 
 
@@ -65,6 +67,7 @@ def expected_row(a: dict[str, Any]) -> dict[str, Any]:
     """The record fields append() must store for the arguments ``a``."""
     pose, est, ref, cmd = a["pose"], a["estimate"], a["reference"], a["command"]
     ctrl = a["controller"] if a["controller"] is not None else Sticks(0, 0, 0, 0)
+    pilot = a["pilot"] if a["pilot"] is not None else Sticks(0, 0, 0, 0)
     nan3, nan4 = np.full(3, np.nan), np.full(4, np.nan)
     return {
         "t": a["t"], "imu_t": a["imu"].t, "imu_counter": a["imu"].counter,
@@ -86,7 +89,8 @@ def expected_row(a: dict[str, Any]) -> dict[str, Any]:
         "state": a["state"], "compute_time": a["compute_time"], "jitter": a["jitter"],
         "latency": a["latency"], "battery_v": a["battery_v"],
         "vehicle_flags": a["vehicle_flags"], "vehicle_mask": a["vehicle_mask"],
-        "pilot_enabled": a["pilot_enabled"],
+        "pilot_enabled": a["pilot_enabled"], "pilot_pitch": pilot.pitch,
+        "pilot_roll": pilot.roll, "pilot_yaw": pilot.yaw, "pilot_thrust": pilot.thrust,
     }
 
 
@@ -126,7 +130,7 @@ def test_missing_estimate_and_reference_are_nan(tmp_path: Path) -> None:
 
 def test_without_a_status_block_the_battery_is_nan(tmp_path: Path) -> None:
     args = make_tick(np.random.default_rng(3), 1)
-    for name in ("battery_v", "vehicle_flags", "vehicle_mask", "pilot_enabled"):
+    for name in ("battery_v", "vehicle_flags", "vehicle_mask", "pilot_enabled", "pilot"):
         del args[name]
     with FlightRecorder.create(tmp_path, CONFIG) as rec:
         rec.append(**args)
@@ -134,7 +138,8 @@ def test_without_a_status_block_the_battery_is_nan(tmp_path: Path) -> None:
     row = data[0]
     assert np.isnan(row["battery_v"]) and row["vehicle_flags"] == row["vehicle_mask"] == 0
     assert row["pilot_enabled"]
-    assert meta["schema_version"] == 3
+    assert row["pilot_thrust"] == row["pilot_yaw"] == 0  # no RC block: no pilot sticks
+    assert meta["schema_version"] == 4
     assert meta["units"]["battery_v"] == "V" and meta["units"]["vehicle_mask"] == "bits"
 
 

@@ -351,8 +351,10 @@ def test_ll_acknowledgements_are_timed_and_missing_ones_counted(latency: float) 
         vehicle.close()
     assert stats.acks + stats.acks_missing == 20
     assert stats.acks == 10 and stats.acks_missing == 10
-    # the responder's latency plus a little scheduling on a pty
-    assert all(latency <= t < latency + 0.015 for t in stats.ack_times), stats.ack_times
+    # the responder's latency, give or take a loaded machine's scheduling (the write is
+    # stamped when it returned); a command matched to the wrong acknowledgement would be
+    # off by the 20 ms command period
+    assert all(latency - 0.008 <= t < latency + 0.015 for t in stats.ack_times), stats.ack_times
     # a missing acknowledgement costs the IMU polls no sample (100 Hz asked for)
     assert stats.frames["imu_rawdata"] / elapsed > 90
 

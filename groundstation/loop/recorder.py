@@ -70,7 +70,10 @@ Fields (frames: NED earth, FRD body; quaternions scalar-first, R(q) = eCb)::
     vehicle_mask         bits     ctrl mask the X-3D applies (STATUS): 0 while the pilot
                                   has every channel, e.g. after its watchdog expired
     pilot_enabled        bool     the pilot's serial-enable switch (RC block; True without it)
-                                  (these four: the last DATA frame that carried them)
+    pilot_pitch, pilot_roll, pilot_yaw, pilot_thrust
+                         RC unit  the pilot's sticks (RC block; 0 without it); with
+                                  cmd_* and vehicle_mask, the sticks the vehicle applied
+                                  (these: the last DATA frame that carried them)
     state                -        supervisor state (names in meta["supervisor_states"])
     compute_time         s        time spent computing this tick
     jitter               s        tick start minus its scheduled time
@@ -99,7 +102,7 @@ from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Stick
 
 log = structlog.get_logger(__name__)
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """Bumped whenever :data:`RECORD_DTYPE` changes; stored in meta.json."""
 
 _XYZ = ("x", "y", "z")
@@ -156,6 +159,10 @@ _SCHEMA: tuple[tuple[str, str, tuple[str, ...] | None, str | tuple[str, ...]], .
     ("vehicle_flags", "|u1", None, "bits"),
     ("vehicle_mask", "|u1", None, "bits"),
     ("pilot_enabled", "|b1", None, "bool"),
+    ("pilot_pitch", "<i2", None, "RC unit"),
+    ("pilot_roll", "<i2", None, "RC unit"),
+    ("pilot_yaw", "<i2", None, "RC unit"),
+    ("pilot_thrust", "<i2", None, "RC unit"),
     ("state", "|u1", None, "enum"),
     ("compute_time", "<f8", None, "s"),
     ("jitter", "<f8", None, "s"),
@@ -357,7 +364,7 @@ class FlightRecorder:
         command: CommandMsg, controller: Sticks | None, sent: bool, state: int,
         compute_time: float, jitter: float, latency: float, preview: Reference | None = None,
         automatic: bool = False, battery_v: float = np.nan, vehicle_flags: int = 0,
-        vehicle_mask: int = 0, pilot_enabled: bool = True,
+        vehicle_mask: int = 0, pilot_enabled: bool = True, pilot: Sticks | None = None,
     ) -> None:
         """Record one tick (hot path: no validation, no allocation).
 
@@ -370,8 +377,8 @@ class FlightRecorder:
             see the ``cmd_automatic`` column
         controller : the controller's sticks before the handover (None: it did not run)
         state : supervisor state as an int; compute_time, jitter, latency [s]
-        battery_v [V], vehicle_flags, vehicle_mask, pilot_enabled : what the vehicle last
-            reported (STATUS and RC blocks)
+        battery_v [V], vehicle_flags, vehicle_mask, pilot_enabled, pilot : what the
+            vehicle last reported (STATUS and RC blocks; pilot None: no RC block)
         Values that do not fit (wrong shape, out of the column's range) skip the row
         and count in :attr:`bad_rows`; appending after close is ignored.
         """
@@ -405,6 +412,11 @@ class FlightRecorder:
             c["vehicle_flags"][i] = vehicle_flags
             c["vehicle_mask"][i] = vehicle_mask
             c["pilot_enabled"][i] = pilot_enabled
+            p = pilot if pilot is not None else _NO_STICKS
+            c["pilot_pitch"][i] = p.pitch
+            c["pilot_roll"][i] = p.roll
+            c["pilot_yaw"][i] = p.yaw
+            c["pilot_thrust"][i] = p.thrust
             c["state"][i] = state
             c["compute_time"][i] = compute_time
             c["jitter"][i] = jitter

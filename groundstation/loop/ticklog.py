@@ -56,4 +56,5 @@ class TickLogger:
             vehicle_flags=status.flags if status is not None else 0,
             vehicle_mask=status.ctrl_mask if status is not None else 0,
             pilot_enabled=rc.serial_enabled if rc is not None else True,
+            pilot=rc.sticks() if rc is not None else None,
         )
