@@ -21,7 +21,7 @@ import pytest
 
 from groundstation import __version__
 from groundstation.asctec.messages import CommandMsg
-from groundstation.errors import GroundStationError
+from groundstation.errors import GroundStationError, RecorderError
 from groundstation.loop.recorder import (
     COLUMN_UNITS,
     FLAT_DTYPE,
@@ -307,3 +307,34 @@ def test_create_reports_an_unwritable_log_dir(tmp_path: Path) -> None:
     blocker.write_text("")
     with pytest.raises(GroundStationError, match="cannot start a flight log"):
         FlightRecorder.create(blocker / "logs", CONFIG)
+
+
+def test_a_schema_3_log_is_read_with_the_new_columns_filled(tmp_path: Path) -> None:
+    """Logs recorded before the pilot's sticks were logged (schema 3: no pilot columns,
+    uint16 counts) stay readable: every old column intact, the new ones zero."""
+    rng = np.random.default_rng(5)
+    ticks = [make_tick(rng, k) for k in range(20)]
+    with FlightRecorder.create(tmp_path, CONFIG) as rec:
+        for args in ticks:
+            rec.append(**args)
+    current = np.load(rec.path)
+    old_fields = [(name, "<u2" if name.endswith("_counts_x") or name.endswith("_counts_y")
+                   or name.endswith("_counts_z") else current.dtype[name].str)
+                  for name in current.dtype.names or () if not name.startswith("pilot_")
+                  or name == "pilot_enabled"]
+    old = np.zeros(len(current), dtype=old_fields)
+    for name, _ in old_fields:
+        old[name] = current[name]
+    np.save(rec.path, old)
+    meta = json.loads((rec.directory / "meta.json").read_text())
+    meta["schema_version"] = 3
+    (rec.directory / "meta.json").write_text(json.dumps(meta))
+    data, meta_back, _ = read_flight(rec.directory)
+    assert meta_back["migrated_from_schema"] == 3
+    for row, args in zip(data, ticks, strict=True):
+        np.testing.assert_array_equal(row["gyro_counts"], args["gyro_counts"])
+        assert row["cmd_thrust"] == args["command"].thrust
+        assert row["pilot_thrust"] == 0
+    np.save(rec.path, np.zeros(3, dtype=[("unknown", "<f8")]))
+    with pytest.raises(RecorderError, match="cannot be read"):
+        read_flight(rec.directory)

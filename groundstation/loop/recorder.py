@@ -539,8 +539,9 @@ def read_flight(path: str | Path) -> tuple[npt.NDArray[np.void], dict[str, Any],
     """Read a flight log: ``(rows as RECORD_DTYPE, meta dict, config YAML text)``.
 
     path : the flight directory or its flight.npy. Works on the log of a flight
-    still running or killed (rows up to the last flush). Raises RecorderError
-    if the files are missing, unreadable or of another schema version.
+    still running or killed (rows up to the last flush), and on a log of an older
+    schema whose columns this one has (the new columns filled: NaN, 0, False). Raises
+    RecorderError if the files are missing or unreadable.
     """
     p = Path(path)
     if not p.exists():
@@ -553,11 +554,29 @@ def read_flight(path: str | Path) -> tuple[npt.NDArray[np.void], dict[str, Any],
     except (OSError, ValueError) as exc:
         raise RecorderError(f"{directory}: not a readable flight log: {exc}") from exc
     if flat.dtype != FLAT_DTYPE:
-        raise RecorderError(
-            f"{directory}: flight log schema {meta.get('schema_version')!r} is not "
-            f"this version's ({SCHEMA_VERSION})"
-        )
+        flat = _migrated(flat, directory, meta)
     return flat.view(RECORD_DTYPE), meta, config
+
+
+def _migrated(flat: npt.NDArray[np.void], directory: Path,
+              meta: dict[str, Any]) -> npt.NDArray[np.void]:
+    """An older log read into this schema: its columns copied (widened where a column
+    grew), columns it lacks filled (NaN, 0, False); ``meta["migrated_from_schema"]`` says
+    so. RecorderError for a log whose columns this schema does not all have."""
+    names = FLAT_DTYPE.names or ()
+    old = flat.dtype.names or ()
+    if not old or not set(old) <= set(names):
+        raise RecorderError(f"{directory}: flight log schema {meta.get('schema_version')!r} "
+                            f"is not this version's ({SCHEMA_VERSION}) and cannot be read "
+                            "into it")
+    out = np.zeros(len(flat), dtype=FLAT_DTYPE)
+    for name in names:
+        if FLAT_DTYPE[name].kind == "f":
+            out[name] = np.nan
+    for name in old:
+        out[name] = flat[name]
+    meta["migrated_from_schema"] = meta.get("schema_version")
+    return out
 
 
 def export_csv(path: str | Path, out_csv: str | Path | TextIO) -> int:
