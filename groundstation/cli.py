@@ -420,6 +420,38 @@ def calibrate_vicon_command(
     _report_calibration(result, "calibrate-vicon", out, as_json)
 
 
+@app.command("verify-model")
+def verify_model_command(
+    log: Annotated[Path, typer.Argument(help="Flight-log directory.")],
+    as_json: JsonOption = False, out: OutOption = Path("."),
+) -> None:
+    """Thesis Ch. 5: the nonlinear and linear models' quaternion and velocity derivatives
+    against the flight's, with a figure (Fig. 5.1-5.4) and the RMS and mean error per axis.
+
+    A constant error in v3_dot is a thrust-map or mass error of that size [m/s^2].
+    """
+    import json
+
+    from groundstation.identification.verify import verify_model
+
+    try:
+        result = verify_model(log)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 2) from exc
+    figure: Path | None = None
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        figure = result.figure(out / "verify-model.png")
+    except GroundStationError as exc:
+        typer.echo(f"no figure: {exc}", err=True)
+    if as_json:
+        typer.echo(json.dumps({**result.figures(), "figure": str(figure) if figure else None}))
+        return
+    typer.echo(result.summary())
+    if figure is not None:
+        typer.echo(f"figure: {figure}")
+
+
 @synth_app.command("hinf")
 def synth_hinf(
     config: ConfigOption,
