@@ -37,7 +37,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
 )
-identify_app = typer.Typer(help="Identify model parameters from measurement CSVs.",
+identify_app = typer.Typer(help="Identify model parameters from measurements and flight logs.",
                            no_args_is_help=True)
 app.add_typer(identify_app, name="identify")
 synth_app = typer.Typer(help="Synthesise controller gains.", no_args_is_help=True)
@@ -333,6 +333,87 @@ def identify_inflow(
     except IdentificationError as exc:
         raise _fail(str(exc), 2) from exc
     typer.echo(fit.report())
+
+
+def _report_fit(result: Any, name: str, out: Path, as_json: bool) -> None:
+    """Print an identification (summary and YAML to paste, or JSON) and write its figure."""
+    import json
+
+    import yaml
+
+    figure: Path | None = None
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        figure = result.figure(out / f"{name}.png")
+    except GroundStationError as exc:  # matplotlib missing: the numbers still count
+        typer.echo(f"no figure: {exc}", err=True)
+    fields = result.config_fields()
+    if as_json:
+        typer.echo(json.dumps({**fields, "figure": str(figure) if figure else None}))
+        return
+    typer.echo(result.summary())
+    nested: dict[str, Any] = {}
+    for key, value in fields.items():
+        section, leaf = key.split(".", 1)
+        nested.setdefault(section, {})[leaf] = value
+    typer.echo("\npaste into the configuration:\n" + yaml.safe_dump(nested, sort_keys=False))
+    if figure is not None:
+        typer.echo(f"figure: {figure}")
+
+
+LogArgument = Annotated[Path, typer.Argument(help="Flight-log directory.")]
+
+
+@identify_app.command("rates")
+def identify_rates_command(
+    log: LogArgument,
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON object keyed by the "
+                                          "configuration's field names.")] = False,
+    out: Annotated[Path, typer.Option(help="Directory for the figure.")] = Path("."),
+    with_scales: Annotated[bool, typer.Option(
+        help="Identify the gyro scale from the same log first (a gyro scale error is "
+             "otherwise a gain error of the same size).")] = False,
+) -> None:
+    """Per axis the stick-to-rate gain, transport delay and rate-loop time constant with
+    95 % intervals (thesis Ch. 3.3.1, eq. 3.22, Fig. 3.8), from the flight's sticks and gyro.
+    Exit 2 for a log that cannot determine them (the message names the axis)."""
+    from groundstation.identification import identify_rates, identify_scales
+
+    try:
+        gyro_scale = identify_scales(log, axes=("gyro_x", "gyro_y", "gyro_z")).gyro_scale \
+            if with_scales else None
+        result = identify_rates(log, gyro_scale=gyro_scale)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 2) from exc
+    _report_fit(result, "identify-rates", out, as_json)
+
+
+@identify_app.command("scales")
+def identify_scales_command(
+    log: LogArgument,
+    axes: Annotated[list[str] | None, typer.Option(
+        "--axis", help="gyro_x|gyro_y|gyro_z|acc_x|acc_y|acc_z (repeatable; default: the "
+                       "gyro and acc_z: in flight the accelerometer's x and y read about "
+                       "zero and need a bench)")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON object keyed by the "
+                                          "configuration's field names.")] = False,
+    out: Annotated[Path, typer.Option(help="Directory for the figure.")] = Path("."),
+) -> None:
+    """Gyro and accelerometer scale factors (Table 6.2) against the body rates and
+    specific force the flight's Vicon poses imply, with 95 % intervals. Exit 2 for a log
+    that cannot determine them (the message names the axis)."""
+    from groundstation.identification import SCALE_AXES, identify_scales
+
+    unknown = [a for a in axes or () if a not in SCALE_AXES]
+    if unknown:
+        raise _fail(f"unknown axis {unknown[0]!r} (one of {', '.join(SCALE_AXES)})", 2)
+    chosen = tuple(a for a in SCALE_AXES if a in axes) if axes else (
+        "gyro_x", "gyro_y", "gyro_z", "acc_z")
+    try:
+        result = identify_scales(log, axes=chosen)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 2) from exc
+    _report_fit(result, "identify-scales", out, as_json)
 
 
 SerialPortOption = Annotated[str | None, typer.Option(help="Serial device or URL.")]
