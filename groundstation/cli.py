@@ -298,21 +298,41 @@ def channels(
                f"(state {reply.get('state')})")
 
 
+def _is_flight_log(path: Path) -> bool:
+    return path.is_dir() or path.name == "flight.npy"
+
+
 @identify_app.command("thrust")
 def identify_thrust(
-    csv: Annotated[Path, typer.Argument(help="CSV of thrust-stand measurements.")],
+    source: Annotated[Path, typer.Argument(
+        help="CSV of thrust-stand measurements, or a flight-log directory.")],
     gravity: Annotated[float, typer.Option(help="g used to turn mass into force.")]
         = VehicleConfig().gravity,
+    as_json: Annotated[bool, typer.Option("--json", help="(flight log) One JSON object keyed "
+                                          "by the configuration's field names.")] = False,
+    out: Annotated[Path, typer.Option(help="(flight log) Directory for the figure.")]
+        = Path("."),
 ) -> None:
     """Fit the thrust polynomial F_lift(u_thrust) (eq. 3.7) to measurements (App. C.1).
 
-    The CSV format is described in ``groundstation/model/identify.py``;
-    ``tests/data/thrust_table_c1.csv`` is the thesis's Table C.1 in that format.
+    From a CSV (format in ``groundstation/model/identify.py``;
+    ``tests/data/thrust_table_c1.csv`` is the thesis's Table C.1): the full cubic. From a
+    flight log: the lift in steady flight (accelerometer) against the stick, as a scale on
+    the configured polynomial (a flight covers the sticks near hover only).
     """
+    if _is_flight_log(source):
+        from groundstation.identification.lift import identify_thrust_log
+
+        try:
+            result = identify_thrust_log(source)
+        except GroundStationError as exc:
+            raise _fail(str(exc), 2) from exc
+        _report_fit(result, "identify-thrust", out, as_json)
+        return
     from groundstation.model.identify import identify_thrust_csv
 
     try:
-        fit = identify_thrust_csv(csv, g=gravity)
+        fit = identify_thrust_csv(source, g=gravity)
     except IdentificationError as exc:
         raise _fail(str(exc), 2) from exc
     typer.echo(fit.report())
@@ -320,16 +340,31 @@ def identify_thrust(
 
 @identify_app.command("inflow")
 def identify_inflow(
-    csv: Annotated[Path, typer.Argument(help="CSV of steady-climb measurements.")],
+    source: Annotated[Path, typer.Argument(
+        help="CSV of steady-climb measurements, or a flight-log directory.")],
+    as_json: Annotated[bool, typer.Option("--json", help="(flight log) One JSON object keyed "
+                                          "by the configuration's field names.")] = False,
+    out: Annotated[Path, typer.Option(help="(flight log) Directory for the figure.")]
+        = Path("."),
 ) -> None:
     """Fit the induced-inflow constant I_i (eq. 3.9) to steady climbs (App. C.2).
 
-    ``tests/data/inflow_table_c2.csv`` is the thesis's Table C.2 in that format.
+    From a CSV (``tests/data/inflow_table_c2.csv`` is the thesis's Table C.2), or from a
+    flight log with steady climbs and descents (a waypoint path with vertical legs).
     """
+    if _is_flight_log(source):
+        from groundstation.identification.lift import identify_inflow_log
+
+        try:
+            result = identify_inflow_log(source)
+        except GroundStationError as exc:
+            raise _fail(str(exc), 2) from exc
+        _report_fit(result, "identify-inflow", out, as_json)
+        return
     from groundstation.model.identify import identify_inflow_csv
 
     try:
-        fit = identify_inflow_csv(csv)
+        fit = identify_inflow_csv(source)
     except IdentificationError as exc:
         raise _fail(str(exc), 2) from exc
     typer.echo(fit.report())
