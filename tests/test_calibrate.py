@@ -54,6 +54,7 @@ def gs(*args: str) -> subprocess.CompletedProcess[str]:
 
 IMU_PLANTED: dict[str, object] = {
     "sim.gyro_bias": list(GYRO_BIAS), "sim.acc_bias": list(ACC_BIAS), "sim.scale_error": 0.0,
+    "sim.seed": 11,
     "vehicle.gyro_variance": list(GYRO_VAR), "vehicle.acc_variance": list(ACC_VAR)}
 VICON_PLANTED: dict[str, object] = {
     "vehicle.vicon_position_variance": list(VICON_POS_VAR),
