@@ -26,8 +26,10 @@ pytest: install
 
 test: lint typecheck pytest
 
+# `make demo PROTOCOL=asctec-ll` flies the virtual AscTec LL vehicle instead of the X-3D
+PROTOCOL ?= x3d
 demo: install
-	$(BIN)/gs fly --config config/sim.yaml --demo
+	$(BIN)/gs fly --config config/sim.yaml --demo --protocol $(PROTOCOL)
 
 bench: install
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
