@@ -183,11 +183,25 @@ def motors(
 @app.command()
 def export(
     log: Annotated[Path, typer.Argument(help="Flight-log directory or its flight.npy.")],
-    out: Annotated[Path | None, typer.Option(help="CSV file (default: stdout).")] = None,
+    out: Annotated[Path | None, typer.Option(
+        help="Output file (default: stdout; required for mcap).")] = None,
+    fmt: Annotated[str, typer.Option("--format", help="csv (one column per value) or mcap "
+                                     "(Foxglove, Lichtblick, PlotJuggler, Rerun)")] = "csv",
 ) -> None:
-    """Export a flight log as CSV (one column per value)."""
+    """Export a flight log as CSV (one column per value) or MCAP (one JSON-encoded topic per
+    group of columns, Foxglove poses for the 3D view; needs the `analysis` extra)."""
     from groundstation.loop.recorder import export_csv
 
+    if fmt == "mcap":
+        from groundstation.export import export_mcap
+
+        if out is None:
+            raise _fail("export --format mcap needs --out FILE.mcap", 2)
+        messages = export_mcap(log, out)
+        typer.echo(f"{messages} messages written to {out}", err=True)
+        return
+    if fmt != "csv":
+        raise _fail(f"export: unknown --format {fmt!r} (csv or mcap)", 2)
     # errors (and a reader that went away: exit 141) are main()'s to report
     rows = export_csv(log, out if out is not None else sys.stdout)
     if out is not None:
@@ -607,7 +621,7 @@ def synth_hinf(
                f"written to {out}")
 
 
-OPTIONAL_EXTRAS = {"matplotlib": "plot", "cvxpy": "hinf"}
+OPTIONAL_EXTRAS = {"matplotlib": "plot", "cvxpy": "hinf", "mcap": "analysis", "pandas": "analysis"}
 """Optional packages and the extra that installs each (pyproject.toml)."""
 
 EXIT_BROKEN_PIPE = 141

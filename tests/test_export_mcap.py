@@ -1,0 +1,103 @@
+"""`gs export --format mcap` (issue 18): a flight log the robotics viewers open.
+
+Read back with the `mcap` package's own reader: every channel decodes (JSON against the
+channel's JSON Schema's properties), every tick is there on every column topic with the
+flight log's own values, poses are in Foxglove's layout, log times are wall-clock from
+meta.json's anchor, and the configuration travels as metadata. The column set of
+flight.npy and of the MCAP cannot drift apart: every column belongs to exactly one topic.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from groundstation.config import apply_overrides, dump_config, load_config
+from groundstation.export import CHANNELS, POSE_TOPICS
+from groundstation.loop.inprocess import fly_in_process
+from groundstation.loop.recorder import RECORD_DTYPE, FlightRecorder, read_flight
+from groundstation.loop.supervisor import State
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_every_column_is_on_exactly_one_topic() -> None:
+    columns = Counter(c for topic in CHANNELS.values() for c in topic)
+    assert set(columns) == set(RECORD_DTYPE.names or ())
+    assert max(columns.values()) == 1
+
+
+@pytest.fixture(scope="module")
+def log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    tmp = tmp_path_factory.mktemp("mcap")
+    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {"trajectory.name": "hover"})
+    with FlightRecorder.create(tmp, dump_config(cfg),
+                               {"supervisor_states": [s.name for s in State]}) as rec:
+        result = fly_in_process(cfg, duration_s=2.0, max_time_s=40.0, recorder=rec)
+        directory = rec.directory
+    assert result.final_state is State.DONE
+    return directory
+
+
+def test_the_mcap_reads_back_with_the_logs_values(log: Path, tmp_path: Path) -> None:
+    out = tmp_path / "flight.mcap"
+    done = subprocess.run([sys.executable, "-m", "groundstation", "export", str(log),
+                           "--format", "mcap", "--out", str(out)],
+                          capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert done.returncode == 0, done.stderr
+    rows, meta, config = read_flight(log)
+    per_topic: dict[str, list[dict[str, object]]] = {}
+    times: dict[str, list[int]] = {}
+    with out.open("rb") as fh:
+        reader = make_reader(fh)
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+        for schema, channel, message in reader.iter_messages():
+            assert channel.message_encoding == "json" and schema is not None
+            body = json.loads(message.data)
+            properties = json.loads(schema.data)["properties"]
+            assert set(body) == set(properties), channel.topic  # decodes against its schema
+            per_topic.setdefault(channel.topic, []).append(body)
+            times.setdefault(channel.topic, []).append(message.log_time)
+    assert set(per_topic) == set(CHANNELS) | set(POSE_TOPICS)
+    for topic in CHANNELS:
+        assert len(per_topic[topic]) == len(rows), topic  # every tick on every column topic
+    np.testing.assert_allclose([m["battery_v"] for m in per_topic["/vehicle"]],
+                               rows["battery_v"])
+    np.testing.assert_allclose([m["gyro"] for m in per_topic["/imu"]], rows["gyro"])
+    names = [m["state_name"] for m in per_topic["/supervisor"]]
+    assert names[-1] == meta["supervisor_states"][rows["state"][-1]] == "DONE"
+    vicon = per_topic["/pose/vicon"]
+    assert len(vicon) == int(rows["vicon_valid"].sum())
+    first = vicon[0]["pose"]  # type: ignore[index]
+    valid = rows[rows["vicon_valid"]][0]
+    assert first["position"]["z"] == pytest.approx(valid["vicon_position"][2])
+    assert first["orientation"]["w"] == pytest.approx(valid["vicon_quaternion"][0])
+    # wall-clock log time: start_time plus the monotonic time since start_monotonic
+    start = dt.datetime.fromisoformat(meta["start_time"]).timestamp()
+    expected = start + (rows["t"][0] - meta["start_monotonic"])
+    assert times["/timing"][0] / 1e9 == pytest.approx(expected, abs=1e-6)
+    assert all(np.diff(times["/timing"]) > 0)
+    assert metadata["config"]["yaml"] == config
+    assert metadata["groundstation"]["schema_version"] == str(meta["schema_version"])
+
+
+def test_mcap_needs_an_output_file(log: Path) -> None:
+    done = subprocess.run([sys.executable, "-m", "groundstation", "export", str(log),
+                           "--format", "mcap"], capture_output=True, text=True, timeout=60,
+                          cwd=REPO)
+    assert done.returncode == 2 and "--out" in done.stderr
+
+
+def test_the_readmes_pandas_one_liner_works(log: Path) -> None:
+    import pandas as pd
+
+    frame = pd.DataFrame(np.load(log / "flight.npy"))
+    assert "battery_v" in frame.columns and len(frame) == len(read_flight(log)[0])
