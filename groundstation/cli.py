@@ -384,8 +384,11 @@ def identify_inflow(
     typer.echo(fit.report())
 
 
-def _report_fit(result: Any, name: str, out: Path, as_json: bool) -> None:
-    """Print an identification (summary and YAML to paste, or JSON) and write its figure."""
+def _report_fit(result: Any, name: str, out: Path, as_json: bool,
+                extra: dict[str, Any] | None = None) -> None:
+    """Print a calibration or identification (its summary and the YAML to paste, or with
+    ``as_json`` one JSON object of its configuration fields plus ``extra``) and write its
+    figure to ``out/<name>.png`` (a note instead where matplotlib is missing)."""
     import json
 
     import yaml
@@ -398,13 +401,15 @@ def _report_fit(result: Any, name: str, out: Path, as_json: bool) -> None:
         typer.echo(f"no figure: {exc}", err=True)
     fields = result.config_fields()
     if as_json:
-        typer.echo(json.dumps({**fields, "figure": str(figure) if figure else None}))
+        typer.echo(json.dumps({**fields, **(extra or {}),
+                                "figure": str(figure) if figure else None}))
         return
     typer.echo(result.summary())
     nested: dict[str, Any] = {}
     for key, value in fields.items():
-        section, leaf = key.split(".", 1)
-        nested.setdefault(section, {})[leaf] = value
+        if "." in key:  # configuration fields; the rest (jitter, frame check) is in the summary
+            section, leaf = key.split(".", 1)
+            nested.setdefault(section, {})[leaf] = value
     typer.echo("\npaste into the configuration:\n" + yaml.safe_dump(nested, sort_keys=False))
     if figure is not None:
         typer.echo(f"figure: {figure}")
@@ -476,34 +481,6 @@ JsonOption = Annotated[bool, typer.Option(
 OutOption = Annotated[Path, typer.Option(help="Directory for the figure.")]
 
 
-def _report_calibration(result: Any, name: str, out: Path, as_json: bool) -> None:
-    """Print a calibration (summary and YAML to paste, or JSON) and write its figure."""
-    import json
-
-    import yaml
-
-    figure: Path | None = None
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        figure = result.figure(out / f"{name}.png")
-    except GroundStationError as exc:  # matplotlib missing: the numbers still count
-        typer.echo(f"no figure: {exc}", err=True)
-    fields = result.config_fields()
-    if as_json:
-        typer.echo(json.dumps({**fields, "samples": result.samples, "seconds": result.seconds,
-                               "figure": str(figure) if figure else None}))
-        return
-    typer.echo(result.summary())
-    nested: dict[str, Any] = {}
-    for key, value in fields.items():
-        if "." in key:
-            section, leaf = key.split(".", 1)
-            nested.setdefault(section, {})[leaf] = value
-    typer.echo("\npaste into the configuration:\n" + yaml.safe_dump(nested, sort_keys=False))
-    if figure is not None:
-        typer.echo(f"figure: {figure}")
-
-
 @calibrate_app.command("imu")
 def calibrate_imu_command(
     config: ConfigOption, seconds: SecondsOption = 10.0, serial_port: SerialPortOption = None,
@@ -525,7 +502,8 @@ def calibrate_imu_command(
         result = calibrate_imu(cfg, seconds, use_vicon=vicon)
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
-    _report_calibration(result, "calibrate-imu", out, as_json)
+    _report_fit(result, "calibrate-imu", out, as_json,
+                {"samples": result.samples, "seconds": result.seconds})
 
 
 @calibrate_app.command("vicon")
@@ -547,7 +525,8 @@ def calibrate_vicon_command(
         result = calibrate_vicon(cfg, seconds)
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
-    _report_calibration(result, "calibrate-vicon", out, as_json)
+    _report_fit(result, "calibrate-vicon", out, as_json,
+                {"samples": result.samples, "seconds": result.seconds})
 
 
 @app.command("verify-model")
