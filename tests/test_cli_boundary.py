@@ -82,13 +82,29 @@ def test_a_closed_pipe_exits_quietly(flight_log: Path) -> None:
     assert err == ""
 
 
-def test_a_missing_optional_package_names_the_extra(flight_log: Path, tmp_path: Path) -> None:
-    fake = tmp_path / "site" / "matplotlib"
+def _without(package: str, tmp_path: Path) -> dict[str, str]:
+    """An environment in which importing ``package`` fails as if it were not installed."""
+    fake = tmp_path / "site" / package
     fake.mkdir(parents=True)
     (fake / "__init__.py").write_text(
-        "raise ModuleNotFoundError(\"No module named 'matplotlib'\", name='matplotlib')\n")
-    out = _gs("report", str(flight_log), "--out", str(tmp_path / "r"),
-              env={"PYTHONPATH": str(tmp_path / "site")})
+        f"raise ModuleNotFoundError(\"No module named '{package}'\", name='{package}')\n")
+    return {"PYTHONPATH": str(tmp_path / "site")}
+
+
+def test_a_missing_optional_package_names_the_extra(flight_log: Path, tmp_path: Path) -> None:
+    out = _gs("export", str(flight_log), "--format", "mcap", "--out", str(tmp_path / "f.mcap"),
+              env=_without("mcap", tmp_path))
     assert out.returncode == 1, out.stderr
-    assert "pip install 'groundstation[plot]'" in out.stderr
+    assert "pip install 'groundstation[analysis]'" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
+def test_a_report_without_matplotlib_still_writes_its_metrics(flight_log: Path,
+                                                              tmp_path: Path) -> None:
+    out = _gs("report", str(flight_log), "--out", str(tmp_path / "r"),
+              env=_without("matplotlib", tmp_path))
+    assert out.returncode == 0, out.stderr
+    assert "pip install 'groundstation[plot]'" in out.stderr  # the one-line note
+    assert (tmp_path / "r" / "metrics.json").is_file()
+    assert not (tmp_path / "r" / "flight.png").exists()
     assert "Traceback" not in out.stderr

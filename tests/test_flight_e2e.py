@@ -151,6 +151,13 @@ def test_demo_keeps_the_truth_with_the_log_and_reports_against_it(tmp_path: Path
     assert report["metrics"]["final_state"] == "DONE"
     assert (log / "report" / "flight.png").stat().st_size > 10_000
     assert "judged from virtual-lab ground truth" in out.stdout
+    # `gs report LOG` on the demo's log finds the truth kept in its directory
+    again = subprocess.run([sys.executable, "-m", "groundstation", "report", str(log),
+                            "--out", str(tmp_path / "again")], capture_output=True, text=True,
+                           timeout=110, cwd=REPO)
+    assert again.returncode == 0, again.stderr
+    metrics = json.loads((tmp_path / "again" / "metrics.json").read_text())
+    assert metrics["truth_file"] == str(log / "truth.npz")
 
 
 @pytest.mark.slow
