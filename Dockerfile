@@ -62,7 +62,7 @@ COPY --from=build /wheels /wheels
 # hadolint ignore=DL3013
 RUN python -m pip install --no-index --find-links /wheels groundstation \
     && rm -rf /wheels
-COPY config/lab.yaml /etc/groundstation/
+COPY config/lab.yaml config/lab-ll.yaml /etc/groundstation/
 
 # By name so the dialout membership from /etc/group reads clearly.
 # hadolint ignore=DL3066
