@@ -96,6 +96,9 @@ class PortLink:
     READ_TIMEOUT = 0.05
     """Longest a read blocks; bounds how long closing waits for the reader [s]."""
 
+    _queue: deque[ReceivedData]
+    """Received samples for :meth:`get` (the subclass creates it, bounded)."""
+
     def __init__(self, url: str, baudrate: int, write_timeout: float, name: str) -> None:
         self.url = url
         self._cond = threading.Condition()
@@ -110,6 +113,23 @@ class PortLink:
     def error(self) -> LinkError | None:
         """The failure of a background thread, if any (the link is then unusable)."""
         return self._error
+
+    def get(self, timeout: float) -> ReceivedData | None:
+        """The oldest queued IMU sample (X-3D DATA, or the LL dialect's IMU_RAWDATA as
+        DATA), waiting up to ``timeout`` [s]; None on timeout.
+
+        Raises LinkError if the link failed or is closed.
+        """
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                self._check_usable()
+                if self._queue:
+                    return self._queue.popleft()
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    return None
+                self._cond.wait(remaining)
 
     def __enter__(self) -> Self:
         return self
@@ -271,22 +291,6 @@ class SerialLink(PortLink):
         if self._stream is None:
             raise ConfigError("this link was built without a CONFIG to start the stream with")
         self.send(self._stream)
-
-    def get(self, timeout: float) -> ReceivedData | None:
-        """The oldest queued DATA sample, waiting up to ``timeout`` [s]; None on timeout.
-
-        Raises LinkError if the link failed or is closed.
-        """
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                self._check_usable()
-                if self._queue:
-                    return self._queue.popleft()
-                remaining = deadline - time.monotonic()
-                if remaining <= 0.0:
-                    return None
-                self._cond.wait(remaining)
 
     def send(self, msg: Message) -> None:
         """Encode and write ``msg`` now. A COMMAND also becomes the keep-alive's command.

@@ -294,20 +294,6 @@ class LlLink(PortLink):
             self._polls.start(time.monotonic())
             self._cond.notify_all()
 
-    def get(self, timeout: float) -> ReceivedData | None:
-        """The oldest queued IMU sample, waiting up to ``timeout`` [s]; None on timeout.
-        Raises LinkError if the link failed or is closed."""
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                self._check_usable()
-                if self._queue:
-                    return self._queue.popleft()
-                remaining = deadline - time.monotonic()
-                if remaining <= 0.0:
-                    return None
-                self._cond.wait(remaining)
-
     def send(self, msg: Message) -> None:
         """Write a command now (``>*>di``); it also becomes the keep-alive's command.
         Anything else is an X-3D message this dialect does not have: ConfigError."""
