@@ -11,7 +11,6 @@ on the ground station's side. The commands must recover the planted truth (zeros
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -19,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from lab_helpers import free_udp_port
 
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
 from groundstation.model.sensors import (
@@ -39,12 +39,6 @@ ACC_VAR = tuple(2 * v for v in ACC_VARIANCE_TABLE_6_3)
 VICON_POS_VAR = tuple(25 * v for v in VICON_POSITION_VARIANCE_TABLE_6_1)
 VICON_Q_VAR = tuple(16 * v for v in VICON_QUATERNION_VARIANCE_TABLE_6_1)
 VICON_RATE = 80.0
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def gs(*args: str) -> subprocess.CompletedProcess[str]:

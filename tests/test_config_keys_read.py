@@ -16,7 +16,6 @@ also shows each of its keys changing the lab.
 
 from __future__ import annotations
 
-import socket
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -25,6 +24,7 @@ from typing import Any
 
 import pytest
 import zmq.auth
+from lab_helpers import free_udp_port
 from pydantic import BaseModel
 from typer.testing import CliRunner
 
@@ -97,12 +97,6 @@ def test_the_recorder_finds_an_unread_key() -> None:
     with recording(reads):
         assert top.section.used == 1
     assert unread(reads, Top) == ["section.forgotten"]
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _fly_briefly(cfg: GroundStationConfig, tmp_path: Path) -> int:

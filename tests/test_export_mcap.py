@@ -18,13 +18,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from lab_helpers import fly_logged, sim_config
 from mcap.reader import make_reader
 
-from groundstation.config import apply_overrides, dump_config, load_config
 from groundstation.export import CHANNELS, POSE_TOPICS
-from groundstation.loop.inprocess import fly_in_process
-from groundstation.loop.recorder import RECORD_DTYPE, FlightRecorder, read_flight
-from groundstation.loop.supervisor import State
+from groundstation.loop.recorder import RECORD_DTYPE, read_flight
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -37,14 +35,8 @@ def test_every_column_is_on_exactly_one_topic() -> None:
 
 @pytest.fixture(scope="module")
 def log(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    tmp = tmp_path_factory.mktemp("mcap")
-    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {"trajectory.name": "hover"})
-    with FlightRecorder.create(tmp, dump_config(cfg),
-                               {"supervisor_states": [s.name for s in State]}) as rec:
-        result = fly_in_process(cfg, duration_s=2.0, max_time_s=40.0, recorder=rec)
-        directory = rec.directory
-    assert result.final_state is State.DONE
-    return directory
+    return fly_logged(sim_config(**{"trajectory.name": "hover"}),
+                      tmp_path_factory.mktemp("mcap"), 2.0)[0]
 
 
 def test_the_mcap_reads_back_with_the_logs_values(log: Path, tmp_path: Path) -> None:

@@ -8,13 +8,13 @@ Ground truth comes from the virtual lab's truth file.
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from lab_helpers import free_udp_port
 
 from groundstation.config import apply_overrides, dump_config, load_config
 from groundstation.loop.daemon import FlightDaemon, FlightSummary
@@ -25,12 +25,6 @@ from groundstation.telemetry.control import send_request
 from sim_device.realtime import SimDeviceProcess
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.mark.slow

@@ -18,7 +18,6 @@ import contextlib
 import gc
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -30,6 +29,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from lab_helpers import free_udp_port
 from structlog.testing import capture_logs
 
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
@@ -41,12 +41,6 @@ from sim_device.realtime import SimDeviceProcess, SimDeviceThread
 
 REPO = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.slow
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def lab_config(tmp_path: Path, **overrides: object) -> GroundStationConfig:

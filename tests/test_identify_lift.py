@@ -14,13 +14,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from lab_helpers import empty_log, fly_logged, sim_config
 
-from groundstation.config import apply_overrides, dump_config, load_config
+from groundstation.config import load_config
 from groundstation.errors import IdentificationError
 from groundstation.identification.lift import identify_inflow_log, identify_thrust_log
-from groundstation.loop.inprocess import fly_in_process
-from groundstation.loop.recorder import FlightRecorder
-from groundstation.loop.supervisor import State
 
 REPO = Path(__file__).resolve().parents[1]
 CLIMBS = "t,x,y,z,yaw\n0,0,0,-1,0\n2,0,0,-1,0\n5,0,0,-1.9,0\n7,0,0,-1.9,0\n10,0,0,-0.8,0\n" \
@@ -29,16 +27,9 @@ THRUST_SCALE, INFLOW = 0.9, -0.6
 
 
 def flight(tmp: Path, trajectory: dict[str, object], seconds: float) -> Path:
-    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {
-        **trajectory, "sim.thrust_scale": THRUST_SCALE, "sim.battery_droop": 0.0,
-        "vehicle.induced_inflow": INFLOW})
-    with FlightRecorder.create(tmp, dump_config(cfg),
-                               {"supervisor_states": [s.name for s in State]}) as rec:
-        result = fly_in_process(cfg, duration_s=seconds, max_time_s=seconds + 40.0,
-                                recorder=rec)
-        directory = rec.directory
-    assert result.final_state is State.DONE
-    return directory
+    cfg = sim_config(**trajectory, **{"sim.thrust_scale": THRUST_SCALE, "sim.battery_droop": 0.0,
+                                      "vehicle.induced_inflow": INFLOW})
+    return fly_logged(cfg, tmp, seconds)[0]
 
 
 @pytest.fixture(scope="module")
@@ -76,10 +67,7 @@ def test_the_commands_take_a_log_and_still_a_csv(climbs: Path, tmp_path: Path) -
 
 
 def test_a_log_with_nothing_off_the_floor_is_refused(tmp_path: Path) -> None:
-    cfg = load_config(REPO / "config" / "sim.yaml")
-    with FlightRecorder.create(tmp_path, dump_config(cfg),
-                               {"supervisor_states": [s.name for s in State]}) as rec:
-        directory = rec.directory  # a flight that never took off: no rows
+    directory = empty_log(tmp_path)  # a flight that never took off: no rows
     with pytest.raises(IdentificationError):
         identify_thrust_log(directory)
     with pytest.raises(IdentificationError):

@@ -15,12 +15,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from lab_helpers import fly_logged, sim_config
 
-from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.config import apply_overrides, load_config
 from groundstation.errors import GroundStationError, IdentificationError
 from groundstation.identification import identify_rates, identify_scales
-from groundstation.loop.inprocess import FlightResult, fly_in_process
-from groundstation.loop.recorder import FLIGHT_FILE, FlightRecorder, read_flight
+from groundstation.loop.inprocess import FlightResult
+from groundstation.loop.recorder import FLIGHT_FILE, read_flight
 from groundstation.loop.supervisor import State
 from sim_device.lab import VirtualLab
 
@@ -48,21 +49,6 @@ PLANTED = {
     "sim.rate_loop_tau_s": 0.09,  # default 0.064
     "sim.scale_error": 0.15,  # gyro scale off by up to 15 % (seed 1: +6.0, -9.8, +4.4 %)
 }
-
-
-def sim_config(**overrides: object) -> GroundStationConfig:
-    return apply_overrides(load_config(REPO / "config" / "sim.yaml"), dict(overrides))
-
-
-def fly_logged(cfg: GroundStationConfig, log_dir: Path, duration_s: float) -> tuple[Path,
-                                                                                      FlightResult]:
-    with FlightRecorder.create(log_dir, dump_config(cfg),
-                               {"supervisor_states": [s.name for s in State]}) as rec:
-        result = fly_in_process(cfg, duration_s=duration_s, max_time_s=duration_s + 40.0,
-                                recorder=rec)
-        directory = rec.directory
-    assert result.final_state is State.DONE
-    return directory, result
 
 
 @pytest.fixture(scope="module")

@@ -14,12 +14,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from lab_helpers import fly_logged, sim_config
 
-from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.config import apply_overrides, load_config
 from groundstation.errors import IdentificationError
 from groundstation.identification import SCALE_AXES, identify_scales
-from groundstation.loop.inprocess import FlightResult, fly_in_process
-from groundstation.loop.recorder import FLIGHT_FILE, FlightRecorder
+from groundstation.loop.inprocess import FlightResult
+from groundstation.loop.recorder import FLIGHT_FILE
 from groundstation.loop.supervisor import State
 from sim_device.lab import VirtualLab
 
@@ -45,21 +46,6 @@ WAYPOINTS = """t,x,y,z,yaw
 FITTABLE = ("gyro_x", "gyro_y", "gyro_z", "acc_z")
 """The axes a flight excites: the rotors push only along body z, so the accelerometer's
 x and y read zero in flight whatever the vehicle does."""
-
-
-def sim_config(**overrides: object) -> GroundStationConfig:
-    return apply_overrides(load_config(REPO / "config" / "sim.yaml"), dict(overrides))
-
-
-def fly_logged(cfg: GroundStationConfig, log_dir: Path, duration_s: float) -> tuple[Path,
-                                                                                      FlightResult]:
-    with FlightRecorder.create(log_dir, dump_config(cfg),
-                               {"supervisor_states": [s.name for s in State]}) as rec:
-        result = fly_in_process(cfg, duration_s=duration_s, max_time_s=duration_s + 40.0,
-                                recorder=rec)
-        directory = rec.directory
-    assert result.final_state is State.DONE
-    return directory, result
 
 
 @pytest.fixture(scope="module")

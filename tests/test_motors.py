@@ -8,25 +8,19 @@ stops them) and reports the motors in LL_STATUS.
 
 from __future__ import annotations
 
-import socket
 import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from lab_helpers import free_udp_port
 
 from groundstation.asctec.ll_link import LlLink
 from groundstation.config import apply_overrides, dump_config, load_config
 from sim_device.realtime import SimDeviceProcess
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def gs(*args: str) -> subprocess.CompletedProcess[str]:

@@ -17,25 +17,16 @@ import sys
 from pathlib import Path
 
 import pytest
+from lab_helpers import empty_log, fly_logged, sim_config
 
-from groundstation.config import apply_overrides, dump_config, load_config
 from groundstation.identification.verify import VerificationError, verify_model
-from groundstation.loop.inprocess import fly_in_process
-from groundstation.loop.recorder import FlightRecorder
-from groundstation.loop.supervisor import State
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 def flight(tmp_path: Path, overrides: dict[str, object], duration_s: float = 12.0) -> str:
-    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"),
-                          {"trajectory.name": "figure-eight", **overrides})
-    with FlightRecorder.create(tmp_path, dump_config(cfg),
-                               {"supervisor_states": [s.name for s in State]}) as rec:
-        result = fly_in_process(cfg, duration_s=duration_s, max_time_s=90.0, recorder=rec)
-        directory = str(rec.directory)
-    assert result.final_state is State.DONE
-    return directory
+    cfg = sim_config(**{"trajectory.name": "figure-eight", **overrides})
+    return str(fly_logged(cfg, tmp_path, duration_s)[0])
 
 
 @pytest.mark.slow
@@ -53,12 +44,8 @@ def test_nominal_vehicle_fits_and_a_thrust_error_shows_as_its_size(tmp_path: Pat
 
 
 def test_a_hover_on_the_floor_is_refused(tmp_path: Path) -> None:
-    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {})
-    with FlightRecorder.create(tmp_path, dump_config(cfg),
-                               {"supervisor_states": [s.name for s in State]}) as rec:
-        directory = str(rec.directory)  # an empty log
     with pytest.raises(VerificationError, match="airborne samples"):
-        verify_model(directory)
+        verify_model(empty_log(tmp_path))
 
 
 @pytest.mark.slow

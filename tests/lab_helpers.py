@@ -1,0 +1,47 @@
+"""Shared by the tests that fly the virtual lab: a free UDP port for its Vicon stream, the
+bundled sim configuration with overrides, a recorded in-process flight, and an empty log.
+Test-only (not part of the package), imported like ``ekf_truth``."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.loop.inprocess import FlightResult, fly_in_process
+from groundstation.loop.recorder import FlightRecorder
+from groundstation.loop.supervisor import State
+
+REPO = Path(__file__).resolve().parents[1]
+META = {"supervisor_states": [s.name for s in State]}
+"""What the daemon writes into every flight log's meta.json."""
+
+
+def free_udp_port() -> int:
+    """A UDP port nothing on loopback is bound to now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def sim_config(**overrides: object) -> GroundStationConfig:
+    """``config/sim.yaml`` with ``overrides`` (dotted keys)."""
+    return apply_overrides(load_config(REPO / "config" / "sim.yaml"), dict(overrides))
+
+
+def fly_logged(cfg: GroundStationConfig, log_dir: Path,
+               duration_s: float) -> tuple[Path, FlightResult]:
+    """Fly ``cfg`` in-process (simulated clock) for ``duration_s`` of trajectory, recording
+    the flight log under ``log_dir``; the flight must end DONE. (log directory, result)."""
+    with FlightRecorder.create(log_dir, dump_config(cfg), META) as rec:
+        result = fly_in_process(cfg, duration_s=duration_s, max_time_s=duration_s + 40.0,
+                                recorder=rec)
+        directory = rec.directory
+    assert result.final_state is State.DONE, result.transitions
+    return directory, result
+
+
+def empty_log(log_dir: Path) -> Path:
+    """A flight log that never took off: no rows."""
+    with FlightRecorder.create(log_dir, dump_config(sim_config()), META) as rec:
+        return rec.directory
