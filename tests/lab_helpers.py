@@ -13,6 +13,23 @@ from groundstation.loop.recorder import FlightRecorder
 from groundstation.loop.supervisor import State
 
 REPO = Path(__file__).resolve().parents[1]
+LIVELY_WAYPOINTS = """t,x,y,z,yaw
+0,0,0,-1,0
+2,0.6,0,-1,0.6
+4,0.6,0.6,-1.4,-0.3
+6,-0.6,0.6,-0.9,0.5
+8,-0.6,-0.6,-1.3,-0.6
+10,0.6,-0.6,-0.8,0.4
+12,0,0,-1.2,-0.4
+14,0.6,0.6,-0.9,0.5
+16,-0.6,0.6,-1.3,-0.5
+18,0,-0.6,-0.9,0.3
+20,0,0,-1,0
+"""
+"""A lively 20 s waypoint path (t [s], x, y, z NED [m], yaw [rad]): 1.2 m legs in 2 s,
+height changes of 0.5 m (the accelerometer's z needs vertical accelerations) and heading
+swings of about 1 rad, for identification; min-jerk shaping makes it flyable."""
+
 META = {"supervisor_states": [s.name for s in State]}
 """What the daemon writes into every flight log's meta.json."""
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from lab_helpers import LIVELY_WAYPOINTS as WAYPOINTS
 from lab_helpers import fly_logged, sim_config
 
 from groundstation.config import apply_overrides, load_config
@@ -26,22 +27,6 @@ from groundstation.loop.supervisor import State
 from sim_device.lab import VirtualLab
 
 REPO = Path(__file__).resolve().parents[1]
-
-# A lively 20 s path: 1.2 m legs in 2 s, height changes of 0.5 m and heading swings of
-# about 1 rad (t, x, y, z NED [m], yaw [rad]); min-jerk shaping makes it flyable.
-WAYPOINTS = """t,x,y,z,yaw
-0,0,0,-1,0
-2,0.6,0,-1,0.6
-4,0.6,0.6,-1.4,-0.3
-6,-0.6,0.6,-0.9,0.5
-8,-0.6,-0.6,-1.3,-0.6
-10,0.6,-0.6,-0.8,0.4
-12,0,0,-1.2,-0.4
-14,0.6,0.6,-0.9,0.5
-16,-0.6,0.6,-1.3,-0.5
-18,0,-0.6,-0.9,0.3
-20,0,0,-1,0
-"""
 
 PLANTED = {
     "sim.k_rate_scale": [1.2, 0.85, 1.3],  # true gains 20 % up, 15 % down, 30 % up
