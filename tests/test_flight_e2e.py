@@ -58,18 +58,23 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
                 if {"state", "health"} <= topics.keys() and \
                         topics["state"]["supervisor"]["name"] == "TRACK":  # type: ignore[index]
                     break
+            # While tracking, hand yaw to the pilot and back over the control socket
+            # (what `gs channels` does).
+            assert daemon.control_endpoint is not None
+            handed = send_request(daemon.control_endpoint,
+                                  {"request": "channels", "auto": ["pitch", "roll", "thrust"]})
+            time.sleep(0.5)
+            back = send_request(daemon.control_endpoint,
+                                {"request": "channels", "auto": ["pitch", "roll", "yaw", "thrust"]})
+            runner.join(60.0)
+            assert not runner.is_alive()
+            # The flight's last message says how it ended (what `gs monitor` shows last).
+            final: dict[str, object] = {}
+            while (msg := client.receive(timeout=0.5)) is not None:
+                if msg[0] == "state" and msg[1].get("final"):
+                    final = msg[1]
         finally:
             client.close()
-        # While tracking, hand yaw to the pilot and back over the control socket
-        # (what `gs channels` does).
-        assert daemon.control_endpoint is not None
-        handed = send_request(daemon.control_endpoint,
-                              {"request": "channels", "auto": ["pitch", "roll", "thrust"]})
-        time.sleep(0.5)
-        back = send_request(daemon.control_endpoint,
-                            {"request": "channels", "auto": ["pitch", "roll", "yaw", "thrust"]})
-        runner.join(60.0)
-        assert not runner.is_alive()
         # Keep the lab running past the command link's delay and the 100 ms watchdog so
         # the truth log shows the final COMMAND (ctrl mask 0) applied.
         time.sleep(0.3)
@@ -78,6 +83,10 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     assert handed == {"ok": True, "auto": ["pitch", "roll", "thrust"], "state": "TRACK"}
     assert back == {"ok": True, "auto": ["pitch", "roll", "yaw", "thrust"], "state": "TRACK"}
     assert topics["state"]["supervisor"]["name"] in {s.name for s in State}  # type: ignore[index]
+    assert final["supervisor"] == {"state": int(State.DONE), "name": "DONE"}
+    assert final["outcome"] == "COMPLETED" and final["reason"] == summary.reason
+    assert isinstance(final["flight_time_s"], float)
+    assert abs(final["flight_time_s"] - summary.duration_s) < 0.5
     # The vehicle's own report is published: its battery (11.8 V, drooping slowly) and
     # that it applies all four channels while tracking.
     vehicle = topics["state"]["vehicle"]

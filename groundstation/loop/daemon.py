@@ -91,6 +91,10 @@ log = structlog.get_logger(__name__)
 RESEND_CONFIG_AFTER_S = 0.5
 """Re-send CONFIG when no DATA arrived for this long (spec 3.1: stream stopped)."""
 
+FINAL_LINGER_S = 0.2
+"""How long the flight's final telemetry may take to reach subscribers before the
+publisher closes [s] (a local subscriber takes well under a millisecond)."""
+
 
 @dataclass
 class FlightSummary:
@@ -195,6 +199,7 @@ class FlightDaemon:
         self.control_endpoint: str | None = None
         """The bound control endpoint (``gs channels``) once :meth:`run` has started."""
         self._control_stats: Callable[[], dict[str, int]] = dict  # the socket's, once open
+        self._last: TickResult | None = None  # the last tick's result (final telemetry)
         self.ready = threading.Event()
         """Set once every resource is open and the loop is about to start."""
 
@@ -248,6 +253,7 @@ class FlightDaemon:
             log.info("flight starting", port=cfg.serial.port, vicon_port=cfg.vicon.port,
                      log=self.log_dir, controller=cfg.controller.type)
             self._loop(_Io(link, vicon, recorder, telemetry, control, notifier, pacer))
+            self._publish_end(telemetry, link, vicon)
             stats = link.stats()
             self._stats.max_command_gap = stats.max_command_gap
             self._stats.keepalive_resends = stats.keepalive_resends
@@ -294,6 +300,7 @@ class FlightDaemon:
         vicon_rate, vicon_age = io.vicon.rate_and_age()
         health = self._front.health(start, vicon_age, vicon_rate)
         result = core.tick(start, imu, poses, self._front.status, health, self.stop_requests)
+        self._last = result
         clock.t_prev = start
         latency = math.nan
         if result.due:
@@ -330,6 +337,7 @@ class FlightDaemon:
             log.exception("flight loop failed", error=repr(exc))
             result = self.core.abort(t, State.ABORTED,
                                      f"internal error: {type(exc).__name__}: {exc}")
+        self._last = result
         try:
             ticklog.record(t, None, None, [], result, compute=0.0, jitter=math.nan,
                            latency=math.nan)
@@ -373,16 +381,38 @@ class FlightDaemon:
         return {"ok": True, "auto": [c for c in CHANNELS if c in auto_now],
                 "state": core.state.name}
 
-    def _snapshot(self, result: TickResult, link: VehicleLink, vicon: ViconClient
-                  ) -> dict[str, dict[str, object]]:
+    def _publish_end(self, telemetry: TelemetryPublisher, link: VehicleLink,
+                     vicon: ViconClient) -> None:
+        """Publish the flight's last ``state`` (``final``, with its terminal state, outcome
+        and reason) and ``health``, and give subscribers up to :data:`FINAL_LINGER_S` to
+        receive them before the publisher closes."""
+        if self._last is None:
+            return
+        sup = self.core.supervisor
+        reason = sup.transitions[-1].reason if sup.transitions else ""
+        try:
+            snapshot = self._snapshot(self._last, link, vicon, final=(sup.outcome.name, reason))
+        except Exception:  # the flight has ended: a failed last message loses only itself
+            log.warning("final telemetry not published", exc_info=True)
+            return
+        t = time.monotonic()
+        for topic, body in snapshot.items():
+            telemetry.publish(topic, body, t)
+        telemetry.close(linger_s=FINAL_LINGER_S)
+
+    def _snapshot(self, result: TickResult, link: VehicleLink, vicon: ViconClient,
+                  final: tuple[str, str] | None = None) -> dict[str, dict[str, object]]:
         status = self._front.status
         sticks = result.sticks if result.sticks is not None else status.pilot
         stats = link.stats()
+        outcome, reason = final if final is not None else (None, None)
         return {
             "state": state_payload(state=int(result.state), state_name=result.state.name,
                                    estimate=result.estimate, reference=result.reference,
                                    sticks=sticks, ctrl_mask=result.command.ctrl,
-                                   sent=result.due, vehicle=_vehicle_section(status)),
+                                   sent=result.due, vehicle=_vehicle_section(status),
+                                   flight_time_s=time.monotonic() - self._stats.t_start,
+                                   final=final is not None, outcome=outcome, reason=reason),
             "health": health_payload(
                 link={"rate_hz": stats.data_rate_hz, "rejected": dict(stats.rejections)},
                 vicon=vicon.health(), estimator=self.core.ekf.health()

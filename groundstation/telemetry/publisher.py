@@ -129,10 +129,14 @@ class TelemetryPublisher(ZmqOwner):
         if self.errors == 1:
             log.warning(event, exc_info=True, **fields)
 
-    def close(self) -> None:
+    def close(self, linger_s: float = 0.0) -> None:
         """Close the socket and, if the publisher owns it, terminate the context.
 
-        Idempotent; pending messages are discarded (LINGER 0).
+        Idempotent. Messages not yet sent are discarded, at once by default, or after
+        they had up to ``linger_s`` [s] to go out (the flight's final messages).
         """
+        if self._socket is not None and linger_s > 0:
+            self._socket.close(linger=round(1000 * linger_s))
+            self._socket = None
         self._close_socket()
         self.endpoint = None

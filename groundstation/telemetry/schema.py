@@ -27,6 +27,12 @@ Topic ``state``::
                 before the first STATUS), serial_active bool (it applies our commands),
                 motors_on bool, rc_valid bool, applied_mask ctrl-mask bits,
                 pilot_enabled bool (the serial-enable switch)} | null
+    flight_time_s  float  seconds since the flight loop started [s]
+    final       bool  true on the one last ``state`` message of a flight, sent when it
+                has ended: ``supervisor`` holds the terminal state
+    outcome     str | null  with ``final``: the flight's outcome (``COMPLETED``, ``FAILSAFE``
+                or ``STOPPED``, as ``gs fly``'s exit code names it)
+    reason      str  with ``final``: why the flight ended (the last transition's reason)
 
 Topic ``health`` (each section an object, or null when that part is not running)::
 
@@ -118,10 +124,12 @@ def missing_fields(topic: str, payload: Mapping[str, Any]) -> list[str]:
 def state_payload(
     *, state: int, state_name: str, estimate: StateEstimate | None,
     reference: Reference | None, sticks: Sticks, ctrl_mask: int, sent: bool,
-    vehicle: Mapping[str, Any] | None = None,
+    vehicle: Mapping[str, Any] | None = None, flight_time_s: float = math.nan,
+    final: bool = False, outcome: str | None = None, reason: str | None = None,
 ) -> dict[str, Any]:
     """Body of a ``state`` message (see the module docstring for fields and units),
-    already in plain JSON types."""
+    already in plain JSON types. ``final`` marks the last message of a flight, which
+    carries its ``outcome`` and ``reason``."""
     error = None
     if estimate is not None and reference is not None:
         e = np.asarray(reference.position) - np.asarray(estimate.position)
@@ -141,7 +149,12 @@ def state_payload(
         "command": {"pitch": sticks.pitch, "roll": sticks.roll, "yaw": sticks.yaw,
                     "thrust": sticks.thrust, "mask": int(ctrl_mask), "sent": bool(sent)},
         "vehicle": vehicle,
+        "flight_time_s": flight_time_s,
+        "final": final,
     })
+    if final:
+        body["outcome"] = outcome
+        body["reason"] = reason
     return body
 
 
