@@ -53,8 +53,13 @@ def test_report_and_export_of_a_recorded_flight(tmp_path: Path) -> None:
     csv = tmp_path / "flight.csv"
     res = runner.invoke(app, ["export", str(log), "--out", str(csv)])
     assert res.exit_code == 0, res.output
-    table = np.genfromtxt(csv, delimiter=",", names=True)
-    assert len(table) > 500 and "est_position_x" in table.dtype.names
+    import pandas as pd
+
+    table = pd.read_csv(csv)  # `name [unit]` headers, as the README reads it
+    assert len(table) > 500 and "est_position_x [m]" in table.columns
+    assert table["state_name"].iloc[-1] == "DONE"
+    np.testing.assert_allclose(table["battery_v [V]"], np.load(log / "flight.npy")["battery_v"],
+                               rtol=0, atol=5e-4)  # to the mV STATUS reports
 
 
 def test_channels_talks_to_the_control_socket() -> None:

@@ -22,12 +22,12 @@ import pytest
 from groundstation import __version__
 from groundstation.asctec.messages import CommandMsg
 from groundstation.errors import GroundStationError, RecorderError
+from groundstation.export import CSV_PRECISION, export_csv
 from groundstation.loop.recorder import (
     COLUMN_UNITS,
     FLAT_DTYPE,
     RECORD_DTYPE,
     FlightRecorder,
-    export_csv,
     read_flight,
 )
 from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
@@ -210,7 +210,7 @@ def test_sigkill_leaves_a_loadable_file_with_the_flushed_rows(tmp_path: Path) ->
 def test_csv_export_reads_back_with_genfromtxt(tmp_path: Path) -> None:
     rng = np.random.default_rng(6)
     ticks = [make_tick(rng, k) for k in range(30)]
-    with FlightRecorder.create(tmp_path, CONFIG) as rec:
+    with FlightRecorder.create(tmp_path, CONFIG, {"supervisor_states": STATES}) as rec:
         for args in ticks:
             rec.append(**args)
     out = tmp_path / "flight.csv"
@@ -218,19 +218,31 @@ def test_csv_export_reads_back_with_genfromtxt(tmp_path: Path) -> None:
     stream = io.StringIO()
     assert export_csv(rec.directory / "flight.npy", stream) == 30  # e.g. sys.stdout
     assert stream.getvalue() == out.read_text()
-    csv = np.genfromtxt(out, delimiter=",", names=True)
-    assert csv.dtype.names == FLAT_DTYPE.names
     header = out.read_text().splitlines()[0].split(",")
-    assert header[:4] == ["t", "imu_t", "imu_counter", "gyro_counts_x"]
+    assert header[:4] == ["t [s]", "imu_t [s]", "imu_counter", "gyro_counts_x [count]"]
+    names = [h.partition(" [")[0] for h in header]
+    assert [n for n in names if n != "state_name"] == list(FLAT_DTYPE.names or ())
+    numbers = [i for i, n in enumerate(names) if n != "state_name"]
+    csv = np.genfromtxt(out, delimiter=",", skip_header=1, usecols=numbers)  # empty -> nan
+    column = {n: csv[:, k] for k, n in enumerate(n for n in names if n != "state_name")}
     flat = np.load(rec.path)
     for name in FLAT_DTYPE.names or ():
-        np.testing.assert_array_equal(csv[name], flat[name].astype(float), err_msg=name)
-    # a vector field flattens x, y, z in order: compare against the inputs themselves
-    np.testing.assert_array_equal(
-        np.column_stack([csv["est_position_x"], csv["est_position_y"], csv["est_position_z"]]),
-        [a["estimate"].position for a in ticks])
-    np.testing.assert_array_equal(csv["est_covariance_diag_baz"],
-                                  [a["estimate"].covariance_diag[15] for a in ticks])
+        if FLAT_DTYPE[name].kind != "f":
+            np.testing.assert_array_equal(column[name], flat[name].astype(float), err_msg=name)
+    # floats at their precision: compare against the inputs themselves
+    position = np.column_stack([column[f"est_position_{c}"] for c in "xyz"])
+    assert CSV_PRECISION["est_position"].digits == 5
+    np.testing.assert_allclose(position, [a["estimate"].position for a in ticks], rtol=0,
+                               atol=5e-6 + 1e-12)
+    assert CSV_PRECISION["est_covariance_diag"] == (4, True)  # 4 significant digits
+    np.testing.assert_allclose(column["est_covariance_diag_baz"],
+                               [a["estimate"].covariance_diag[15] for a in ticks], rtol=5e-4)
+    np.testing.assert_array_equal(column["battery_v"], [round(a["battery_v"], 3) for a in ticks])
+    no_pose = [a["pose"] is None for a in ticks]
+    np.testing.assert_array_equal(np.isnan(column["vicon_position_x"]), no_pose)
+    state_names = [line.split(",")[names.index("state_name")]
+                   for line in out.read_text().splitlines()[1:]]
+    assert state_names == [STATES[a["state"]] for a in ticks]
 
 
 def test_meta_and_config_files(tmp_path: Path) -> None:

@@ -89,7 +89,7 @@ import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -186,7 +186,8 @@ FLAT_DTYPE = np.dtype([
     for name, typ, comps, _ in _SCHEMA
     for c in (comps or ("",))
 ])
-"""The same bytes as :data:`RECORD_DTYPE` with one scalar column per value (on disk, CSV)."""
+"""The same bytes as :data:`RECORD_DTYPE` with one scalar column per value (on disk; the
+columns of :mod:`groundstation.export`'s CSV and Parquet)."""
 
 COLUMN_UNITS: dict[str, str] = {
     (name if comps is None else f"{name}_{c}"): (unit if isinstance(unit, str) else unit[k])
@@ -577,24 +578,3 @@ def _migrated(flat: npt.NDArray[np.void], directory: Path,
         out[name] = flat[name]
     meta["migrated_from_schema"] = meta.get("schema_version")
     return out
-
-
-def export_csv(path: str | Path, out_csv: str | Path | TextIO) -> int:
-    """Write a flight log as CSV, one column per :data:`FLAT_DTYPE` field; return the row count.
-
-    out_csv : a file path, or an open text stream (e.g. ``sys.stdout``)
-
-    The header line names the columns (``t,imu_t,...,est_position_x,...``); floats
-    are written with shortest round-trip precision, bools as 0/1, missing values
-    as ``nan``. ``np.genfromtxt(out_csv, delimiter=",", names=True)`` reads it back.
-    Raises RecorderError if the log cannot be read or the CSV written.
-    """
-    data, _, _ = read_flight(path)
-    flat = data.view(FLAT_DTYPE)
-    names = FLAT_DTYPE.names or ()
-    fmt = ["%s" if FLAT_DTYPE[n].kind == "f" else "%d" for n in names]
-    try:
-        np.savetxt(out_csv, flat, fmt=fmt, delimiter=",", header=",".join(names), comments="")
-    except OSError as exc:
-        raise RecorderError(f"cannot write {out_csv}: {exc}") from exc
-    return len(flat)
