@@ -184,24 +184,27 @@ def motors(
 def export(
     log: Annotated[Path, typer.Argument(help="Flight-log directory or its flight.npy.")],
     out: Annotated[Path | None, typer.Option(
-        help="Output file (default: stdout; required for mcap).")] = None,
-    fmt: Annotated[str, typer.Option("--format", help="csv (one column per value) or mcap "
-                                     "(Foxglove, Lichtblick, PlotJuggler, Rerun)")] = "csv",
+        help="Output file (default: stdout; required for parquet and mcap).")] = None,
+    fmt: Annotated[str, typer.Option("--format", help="csv (one column per value, units in "
+                                     "the header), parquet, or mcap (Foxglove, Lichtblick, "
+                                     "PlotJuggler, Rerun)")] = "csv",
 ) -> None:
-    """Export a flight log as CSV (one column per value) or MCAP (one JSON-encoded topic per
-    group of columns, Foxglove poses for the 3D view; needs the `analysis` extra)."""
-    from groundstation.loop.recorder import export_csv
+    """Export a flight log as CSV (one column per value, `name [unit]` header, floats at
+    their sensor's precision), Parquet (full precision, units in the field metadata) or
+    MCAP (one JSON-encoded topic per group of columns, Foxglove poses for the 3D view);
+    Parquet and MCAP need the `analysis` extra."""
+    from groundstation.export import export_csv, export_mcap, export_parquet
 
-    if fmt == "mcap":
-        from groundstation.export import export_mcap
-
+    if fmt in ("parquet", "mcap"):
         if out is None:
-            raise _fail("export --format mcap needs --out FILE.mcap", 2)
-        messages = export_mcap(log, out)
-        typer.echo(f"{messages} messages written to {out}", err=True)
+            raise _fail(f"export --format {fmt} needs --out FILE.{fmt}", 2)
+        if fmt == "mcap":
+            typer.echo(f"{export_mcap(log, out)} messages written to {out}", err=True)
+        else:
+            typer.echo(f"{export_parquet(log, out)} rows written to {out}", err=True)
         return
     if fmt != "csv":
-        raise _fail(f"export: unknown --format {fmt!r} (csv or mcap)", 2)
+        raise _fail(f"export: unknown --format {fmt!r} (csv, parquet or mcap)", 2)
     # errors (and a reader that went away: exit 141) are main()'s to report
     rows = export_csv(log, out if out is not None else sys.stdout)
     if out is not None:
@@ -269,6 +272,29 @@ def monitor(
 
     try:
         run_monitor(endpoint, duration)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 1) from exc
+
+
+@app.command()
+def foxglove(
+    endpoint: Annotated[str, typer.Option(help="Telemetry endpoint to subscribe to.")] =
+        "tcp://127.0.0.1:5556",
+    host: Annotated[str, typer.Option(help="Address to serve the WebSocket on.")] =
+        "127.0.0.1",
+    port: Annotated[int, typer.Option(min=0, max=65535, help="WebSocket port (0: any free).")]
+        = 8765,
+    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds.")] = None,
+) -> None:
+    """Live view in Foxglove or Lichtblick: serve the telemetry as a Foxglove WebSocket
+    (ws://HOST:PORT; poses, paths and frames in 3D, supervisor state, plots).
+
+    Needs foxglove-sdk, the package's `foxglove` extra. Ctrl-C to quit.
+    """
+    from groundstation.telemetry.foxglove import run_foxglove
+
+    try:
+        run_foxglove(endpoint, host=host, port=port, duration=duration, echo=typer.echo)
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
 
