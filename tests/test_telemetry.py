@@ -1,15 +1,10 @@
 """Telemetry over real ZeroMQ sockets on tcp://127.0.0.1 (OS-chosen free ports): round trip,
-schema, rate limiting on simulated times, never blocking, clean close, the monitor view."""
+schema, rate limiting on simulated times, never blocking, clean close. The monitor's
+tests are in test_monitor.py."""
 
 from __future__ import annotations
 
-import io
 import json
-import signal
-import subprocess
-import sys
-import textwrap
-import threading
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -25,8 +20,6 @@ from groundstation.telemetry import (
     TelemetryClient,
     TelemetryPublisher,
     health_payload,
-    render,
-    run_monitor,
     state_payload,
 )
 from groundstation.telemetry.schema import REQUIRED_FIELDS, missing_fields
@@ -234,71 +227,3 @@ def test_client_skips_malformed_messages() -> None:
                 assert client.bad_messages == 3
         finally:
             raw.close(linger=0)
-
-
-def test_render_shows_the_view() -> None:
-    state, health = snapshot()["state"], snapshot()["health"]
-    text = "\n".join(render({**state, "schema": 1}, health, endpoint="tcp://x:1", received=7,
-                            age_s=0.05))
-    assert "TRACK (2)" in text
-    assert "x  +0.100  y  -0.200  z  -0.950 m" in text  # estimate
-    assert "x  +0.400  y  +0.200  z  -0.050 m  |e| 0.450 m" in text  # reference - estimate
-    assert "99.5 Hz  rejected 3 (crc 2, length 1)" in text
-    assert "thrust 2010  mask 1111  sent" in text and "rejected_updates 4" in text
-    assert "vehicle    battery  11.78 V  applies 1111  motors on  RC ok  switch on" in text
-    handed = render({**state, "vehicle": {**VEHICLE, "serial_active": False,
-                                          "applied_mask": 0}}, health)
-    assert any("applies none (pilot)" in line for line in handed)
-    waiting = render(None, None)
-    assert "waiting" in waiting[0] and len(waiting) == len(render(state, health))
-    assert "NO DATA for 3.0 s" in render(state, health, age_s=3.0)[0]
-
-
-def test_run_monitor_redraws_in_place(pub: TelemetryPublisher) -> None:
-    stop = threading.Event()
-
-    def feed() -> None:
-        k = 0
-        while not stop.is_set():
-            pub.maybe_publish(k * 0.01, snapshot)
-            k += 1
-            stop.wait(0.01)
-
-    feeder = threading.Thread(target=feed, name="telemetry-feed")
-    feeder.start()
-    out = io.StringIO()
-    try:
-        received = run_monitor(pub.endpoint or "", duration=1.5, out=out, refresh_s=0.1)
-    finally:
-        stop.set()
-        feeder.join()
-    text = out.getvalue()
-    assert received > 0 and "TRACK (2)" in text
-    frames = text.count("groundstation monitor")
-    assert frames >= 2 and text.count("\x1b[13F") == frames - 1  # cursor up over 13 lines
-
-
-_MONITOR = textwrap.dedent("""
-    import sys
-    from groundstation.telemetry import run_monitor
-    print("received", run_monitor(sys.argv[1], refresh_s=0.05), flush=True)
-""")
-
-
-def test_monitor_stops_cleanly_on_ctrl_c(pub: TelemetryPublisher) -> None:
-    proc = subprocess.Popen([sys.executable, "-c", _MONITOR, pub.endpoint or ""],
-                            stdout=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout is not None
-        for _ in range(3):  # wait until the view is drawn
-            assert "groundstation monitor" in proc.stdout.readline()
-            for _line in range(12):
-                proc.stdout.readline()
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    assert proc.returncode == 0
-    assert "received 0" in out
