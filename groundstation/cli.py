@@ -20,6 +20,7 @@ from typing import Annotated, Any, NoReturn
 import typer
 
 from groundstation import __version__
+from groundstation.cli_api import register as register_api_commands
 from groundstation.config import (
     GroundStationConfig,
     VehicleConfig,
@@ -258,7 +259,8 @@ def report(
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
     typer.echo(f"{result.report_md}, {result.metrics_json}"
-               + (f", {result.figure}" if result.figure else ""))
+               + (f", {len(result.figures)} figures ({result.figure.name}, ...) in "
+                  f"{result.figure.parent}" if result.figure else ""))
 
 
 @app.command()
@@ -706,3 +708,4 @@ def _add_lab_commands() -> None:
 
 
 _add_lab_commands()
+register_api_commands(app)  # gs goto, land, hold, status (groundstation/cli_api.py)

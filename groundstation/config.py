@@ -527,7 +527,7 @@ class ControllerConfig(ConfigModel):
 # --------------------------------------------------------------------------- trajectory
 TrajectoryName = Literal[
     "hover", "step-x", "step-y", "step-z", "square", "yz-rectangle", "low-hover",
-    "figure-eight", "yaw-turn", "waypoints",
+    "figure-eight", "yaw-turn", "waypoints", "none",
 ]
 
 
@@ -712,6 +712,21 @@ class RealtimeConfig(ConfigModel):
     # the air (issue 14). false: the interpreter's own collector
 
 
+# --------------------------------------------------------------------------- api
+class ApiConfig(ConfigModel):
+    """Motions commanded at run time (``trajectory.name: none``; ``groundstation.client``,
+    ``gs goto``): the flight takes off to ``trajectory.center`` and holds there until a
+    client asks for a motion; each is checked against the safety limits and volume."""
+
+    idle_land_s: float = Field(60.0, gt=0, le=3600.0)
+    # land after holding this long without a motion command [s]; tuned for experiments
+    # driven from a notebook (a minute to type the next command)
+    speed_m_s: PositiveFloat = 0.5
+    # mean speed of a go-to without a duration [m/s]; the take-off's climb speed
+    arrival_tolerance_m: PositiveFloat = 0.05
+    # a motion has arrived once its reference is at rest and the estimate this close [m]
+
+
 # --------------------------------------------------------------------------- top level
 class GroundStationConfig(ConfigModel):
     """The whole configuration file."""
@@ -727,6 +742,7 @@ class GroundStationConfig(ConfigModel):
     telemetry: TelemetryConfig = TelemetryConfig()
     logging: LoggingConfig = LoggingConfig()
     realtime: RealtimeConfig = RealtimeConfig()
+    api: ApiConfig = ApiConfig()
     sim: SkipValidation[SerializeAsAny[BaseModel] | None] = None
     # the virtual lab's section (config/sim.yaml): the ground station never reads it;
     # validate_config has the installed lab validate it (groundstation.lab)
@@ -835,6 +851,11 @@ def _problems(exc: ValidationError) -> list[tuple[str, object, str]]:
             reason = f"{reason}: a time, rate, length or gain is never infinite or NaN"
         out.append((path, value, reason))
     return out
+
+
+def describe_problems(exc: ValidationError) -> str:
+    """Every problem of ``exc`` on one line: ``field: reason; field: reason``."""
+    return "; ".join(f"{path}: {reason}" for path, _value, reason in _problems(exc))
 
 
 def _raise(problems: list[tuple[str, object, str]], source: str) -> None:

@@ -36,6 +36,7 @@ from groundstation.config import (
     dump_config,
     load_config,
 )
+from groundstation.loop.api import MotionApi
 from groundstation.loop.core import FlightCore
 from groundstation.loop.daemon import FlightDaemon
 from groundstation.loop.motors import motor_gesture_command
@@ -143,6 +144,7 @@ def test_every_configuration_key_is_read(tmp_path: Path) -> None:
     curve = apply_overrides(base, {"telemetry.control_server_key": server_secret,
                                    "telemetry.control_client_keys": str(keys / "clients")})
     ll = apply_overrides(base, {"serial.protocol": "asctec-ll"})
+    commanded = apply_overrides(base, {"trajectory.name": "none"})
     hinf_file = tmp_path / "hinf.yaml"
     hinf_file.write_text(dump_config(base), encoding="utf-8")
     steps: dict[str, Callable[[], object]] = {
@@ -156,6 +158,8 @@ def test_every_configuration_key_is_read(tmp_path: Path) -> None:
         "flight core (asctec-ll)": lambda: FlightCore(ll),
         "virtual lab parameters (asctec-ll)": lambda: LabParams.from_config(ll),
         "gs motors start (asctec-ll)": lambda: _motors(ll, tmp_path),
+        "run-time API (trajectory none)": lambda: MotionApi(
+            FlightCore(commanded), commanded),
     }
     reads: set[Read] = set()
     results = {}

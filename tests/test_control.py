@@ -106,7 +106,7 @@ def test_port_in_use_names_the_endpoint() -> None:
 
 
 @pytest.mark.parametrize(("request_", "error"), [
-    ({"request": "land"}, "unknown request 'land'"),
+    ({"request": "jump"}, "unknown request 'jump'"),
     ({"request": "channels", "auto": []}, "one or more"),
     ({"request": "channels", "auto": ["thrust", "elevator"]}, "one or more"),
     ({"request": "channels", "auto": ["thrust", "thrust"]}, "once each"),

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -100,6 +101,13 @@ def load_waypoints(path: str | Path, *, smoothing_s: float = 0.0,
     short way); without one the heading is ``yaw`` [rad] (None: free heading).
     Raises TrajectoryError naming the line of any problem.
     """
+    return waypoints_from_rows(read_waypoint_rows(path), smoothing_s=smoothing_s, yaw=yaw,
+                               source=str(path))
+
+
+def read_waypoint_rows(path: str | Path) -> list[list[float]]:
+    """The ``t, x, y, z[, yaw]`` rows of a waypoint CSV (see :func:`load_waypoints`);
+    TrajectoryError naming the line of a problem."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -126,15 +134,31 @@ def load_waypoints(path: str | Path, *, smoothing_s: float = 0.0,
             raise TrajectoryError(f"{path}:{lineno}: row has {len(values)} columns, "
                                   f"the first had {len(rows[0])}")
         rows.append(values)
+    return rows
+
+
+def waypoints_from_rows(rows: Sequence[Sequence[float]], *, smoothing_s: float = 0.0,
+                        yaw: float | None = None, source: str = "waypoints") -> PiecewiseLinear:
+    """An open path through ``rows`` of ``t, x, y, z[, yaw]`` (s, NED m, rad), as
+    :func:`load_waypoints` reads them from a file; TrajectoryError, starting with
+    ``source``, for fewer than 2 rows, rows of other lengths or values that are not finite
+    numbers, or times that do not increase."""
     if len(rows) < 2:
-        raise TrajectoryError(f"{path}: needs at least 2 waypoints, found {len(rows)}")
-    data = np.array(rows)
+        raise TrajectoryError(f"{source}: needs at least 2 waypoints, found {len(rows)}")
+    width = len(rows[0])
+    for k, row in enumerate(rows):
+        if len(row) != width or width not in (4, 5) or not all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in row):
+            raise TrajectoryError(f"{source}: waypoint {k}: expected 4 or 5 finite values "
+                                  f"(t, x, y, z[, yaw]) like the first, found {list(row)!r:.80}")
+    data = np.array(rows, dtype=float)
     headings: float | FloatArray | None = data[:, 4] if data.shape[1] == 5 else yaw
     try:
         return PiecewiseLinear(data[:, 0] - data[0, 0], data[:, 1:4], smoothing_s=smoothing_s,
                                yaw=headings, name="waypoints")
     except TrajectoryError as exc:
-        raise TrajectoryError(f"{path}: {exc}") from None
+        raise TrajectoryError(f"{source}: {exc}") from None
 
 
 def make_trajectory(

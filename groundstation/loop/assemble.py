@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller
 from groundstation.control.feasibility import FlightLimits, LimitNames, Volume, check_feasibility
@@ -20,6 +22,7 @@ from groundstation.control.shaping import shape_for_flight
 from groundstation.control.trajectories import trajectory_from_config
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import ConfigError
+from groundstation.loop.commander import DEFAULT_MOVE_ACCEL_M_S2, Commander, MotionLimits
 from groundstation.loop.inputs import quadrotor_params
 
 
@@ -86,6 +89,27 @@ def volume_from_config(config: GroundStationConfig) -> Volume:
                   name="safety.volume")
 
 
+def motion_limits_from_config(config: GroundStationConfig) -> MotionLimits:
+    """How run-time motions are sized and checked (:mod:`groundstation.loop.commander`):
+    the trajectory's limits and volume, ``api.speed_m_s``."""
+    return MotionLimits(flight_limits_from_config(config), volume_from_config(config),
+                        speed=config.api.speed_m_s, accel=DEFAULT_MOVE_ACCEL_M_S2)
+
+
+def commander_from_config(config: GroundStationConfig) -> Commander:
+    """The commanded trajectory of ``trajectory.name: none``: hover at ``trajectory.center``
+    (heading ``trajectory.yaw_deg``, or the one at take-off) until a client asks for more;
+    TrajectoryError if the hover point is outside the volume."""
+    t, api = config.trajectory, config.api
+    commander = Commander(np.asarray(t.center, dtype=float),
+                          None if t.yaw_deg is None else math.radians(t.yaw_deg),
+                          arrival_tolerance_m=api.arrival_tolerance_m,
+                          idle_land_s=api.idle_land_s)
+    check_feasibility(commander, flight_limits_from_config(config),
+                      volume=volume_from_config(config), horizon_s=1.0)
+    return commander
+
+
 def trajectory_for_flight(config: GroundStationConfig, trajectory: Trajectory | None = None,
                           duration_s: float | None = None) -> tuple[Trajectory, float]:
     """The trajectory to fly and how long to fly it [s], checked before flight.
@@ -98,7 +122,10 @@ def trajectory_for_flight(config: GroundStationConfig, trajectory: Trajectory | 
     checked against the limits and the volume (:func:`flight_limits_from_config`,
     :func:`volume_from_config`). Raises TrajectoryError (a waypoint file that cannot
     be read, one line per broken limit) before anything is connected.
+    ``trajectory.name: none`` is the :func:`commander_from_config`, flown until it lands.
     """
+    if trajectory is None and config.trajectory.name == "none":  # flown by run-time commands
+        return commander_from_config(config), math.inf
     traj = trajectory if trajectory is not None else trajectory_from_config(config.trajectory)
     if duration_s is None:
         duration_s = traj.duration if traj.periodic and traj.duration > 0.0 \

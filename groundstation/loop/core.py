@@ -41,6 +41,7 @@ from groundstation.estimation.base import Estimator
 from groundstation.estimation.ekf import Ekf
 from groundstation.estimation.records import EkfParams, InitReport
 from groundstation.loop.assemble import controller_from_config, trajectory_for_flight
+from groundstation.loop.commander import Commander
 from groundstation.loop.inputs import InputHealth, VehicleStatus, quadrotor_params
 from groundstation.loop.mission import Mission
 from groundstation.loop.supervisor import Observation, State, Supervisor, SupervisorLimits
@@ -133,6 +134,8 @@ class FlightCore:
                                land_speed=config.safety.land_speed_m_s,
                                spool_s=config.serial.handover_blend_s,
                                max_yaw_rate=math.radians(config.safety.max_yaw_rate_deg_s))
+        self.commander = self.trajectory if isinstance(self.trajectory, Commander) else None
+        """The run-time commands' trajectory (``trajectory.name: none``), else None."""
         self.supervisor = Supervisor(limits_from_config(config))
         self.handover = ChannelHandover(blend_time=config.serial.handover_blend_s)
         self._auto = tuple(config.channels.auto)
@@ -154,6 +157,7 @@ class FlightCore:
         self._last_pose: Pose | None = None
         self._held: ImuSample | None = None
         self._estimate: StateEstimate | None = None
+        self._land_request = ""
 
     # ------------------------------------------------------------------ public
     @property
@@ -165,6 +169,23 @@ class FlightCore:
     def auto_channels(self) -> tuple[Channel, ...]:
         """The channels the ground station controls while it commands the vehicle."""
         return self._auto
+
+    @property
+    def last_estimate(self) -> StateEstimate | None:
+        """The estimate of the last tick (None before the estimator runs)."""
+        return self._estimate
+
+    @property
+    def land_request_reason(self) -> str:
+        """Why the flight is to land at once ("" when it is not): a request, or the
+        commanded flight idle too long."""
+        if self._land_request:
+            return self._land_request
+        return self.commander.land_request if self.commander is not None else ""
+
+    def request_land(self, reason: str) -> None:
+        """Land as soon as the supervisor can (from TAKEOFF or TRACK; a nominal end)."""
+        self._land_request = self._land_request or reason
 
     def set_auto_channels(self, channels: Sequence[Channel]) -> None:
         """Change at run time which channels the ground station controls (bumpless:
@@ -183,6 +204,12 @@ class FlightCore:
         if state is not old:
             self._enter(state, old, t, position)
         reference = self.mission.reference(t)
+        if self.commander is not None:
+            if old is State.TRACK and state is not State.TRACK:
+                self.commander.preempt(self.mission.trajectory_time,
+                                       f"{state.name}: {self.supervisor.transitions[-1].reason}")
+            self.commander.update(t, self.mission.trajectory_time, state is State.TRACK,
+                                  position)
         commanding = self.supervisor.commanding
         due = t >= self._next_command or commanding != self._was_commanding
         if due:
@@ -284,6 +311,7 @@ class FlightCore:
             pilot_enabled=vehicle.pilot_enabled, vehicle_applying=vehicle.applying,
             stop_requests=stop_requests, lift_fraction=self._lift_fraction,
             specific_force_g=force_g, battery_v=vehicle.battery_v,
+            land_request=self.land_request_reason,
         )
 
     def _vicon_age(self, health: InputHealth) -> float:

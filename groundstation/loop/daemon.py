@@ -46,12 +46,11 @@ Only a resource that cannot be opened raises (nothing was sent to the vehicle).
 from __future__ import annotations
 
 import math
-import reprlib
 import signal
 import threading
 import time
-from collections.abc import Callable
-from contextlib import ExitStack
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
 from dataclasses import asdict, dataclass, field
 from functools import partial
 
@@ -59,12 +58,12 @@ import numpy as np
 import structlog
 
 from groundstation.asctec.dialect import VehicleLink, open_link
-from groundstation.asctec.messages import CHANNELS
 from groundstation.asctec.stats import LinkStats
 from groundstation.config import GroundStationConfig, dump_config
 from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import LinkError
+from groundstation.loop.api import LoopInbox, MotionApi
 from groundstation.loop.core import FlightCore, TickResult
 from groundstation.loop.inputs import DataFrontEnd, VehicleStatus
 from groundstation.loop.realtime import (
@@ -200,6 +199,10 @@ class FlightDaemon:
         """The bound control endpoint (``gs channels``) once :meth:`run` has started."""
         self._control_stats: Callable[[], dict[str, int]] = dict  # the socket's, once open
         self._last: TickResult | None = None  # the last tick's result (final telemetry)
+        self._inbox = LoopInbox()
+        self._front_health: Callable[[], dict[str, object]] = dict
+        self._api = MotionApi(self.core, config, in_loop=self._inbox.call,
+                              health=lambda: self._front_health())
         self.ready = threading.Event()
         """Set once every resource is open and the loop is about to start."""
 
@@ -241,6 +244,8 @@ class FlightDaemon:
             stack.callback(control.close)
             self.control_endpoint = control.endpoint
             self._control_stats = control.stats
+            if control.endpoint is not None:  # stopped before the socket closes
+                stack.enter_context(self._serving(control))
             stack.enter_context(on_stop_signals(self._on_signal))
             stack.enter_context(cpu_latency_request(cfg.realtime.cpu_dma_latency_us))
             stack.enter_context(switch_interval(cfg.realtime.switch_interval_ms / 1000.0))
@@ -252,7 +257,11 @@ class FlightDaemon:
             self.ready.set()
             log.info("flight starting", port=cfg.serial.port, vicon_port=cfg.vicon.port,
                      log=self.log_dir, controller=cfg.controller.type)
-            self._loop(_Io(link, vicon, recorder, telemetry, control, notifier, pacer))
+            self._front_health = partial(self._health_section, link, vicon)
+            try:
+                self._loop(_Io(link, vicon, recorder, telemetry, control, notifier, pacer))
+            finally:
+                self._inbox.close()  # requests now run where they arrive, or are refused
             self._publish_end(telemetry, link, vicon)
             stats = link.stats()
             self._stats.max_command_gap = stats.max_command_gap
@@ -269,6 +278,7 @@ class FlightDaemon:
         ends the flight there (see the module docstring), with one last logged row."""
         core = self.core
         ticklog = TickLogger(io.recorder)
+        self._inbox.open()
         self._stats.t_start = time.monotonic()
         clock = _Clock(t_prev=self._stats.t_start, wd_interval=io.notifier.watchdog_interval(),
                        last_config=self._stats.t_start)  # run() has just sent CONFIG
@@ -315,7 +325,7 @@ class FlightDaemon:
         ticklog.record(start, rx.msg if rx is not None else None, imu, poses, result,
                        compute=compute, jitter=start - scheduled, latency=latency)
         io.telemetry.maybe_publish(start, partial(self._snapshot, result, link, io.vicon))
-        io.control.poll(self.handle_request)
+        self._inbox.run_pending()  # run-time requests, between ticks (loop/api.py)
         if clock.wd_interval is not None and start >= clock.next_wd:
             io.notifier.watchdog()
             clock.next_wd = start + clock.wd_interval / 2
@@ -358,28 +368,34 @@ class FlightDaemon:
             s.track_max = max(s.track_max, err)
 
     def handle_request(self, request: Request) -> Reply:
-        """Answer one run-time request (see :mod:`groundstation.telemetry.control`).
+        """Answer one run-time request (:mod:`groundstation.loop.api`): status, motions,
+        land, channels. Runs in the control socket's thread; what touches the flight runs
+        in the loop between two ticks."""
+        return self._api.handle(request)
 
-        ``channels`` with ``auto`` (a non-empty list of channel names) hands exactly
-        those channels to the controller from the next COMMAND, bumpless; the rest go
-        to the pilot at once. An empty set is refused: handing everything back is
-        the pilot's serial-enable switch (or a stop), which the supervisor follows.
-        """
-        if request.get("request") != "channels":
-            return {"ok": False, "error": f"unknown request {reprlib.repr(request.get('request'))} "
-                                          "(known: 'channels')"}
-        core = self.core
-        if "auto" in request:
-            auto = request["auto"]
-            if not isinstance(auto, list) or not auto or \
-                    any(c not in CHANNELS for c in auto) or len(set(auto)) != len(auto):
-                return {"ok": False, "error": f"'auto' must list one or more of {list(CHANNELS)} "
-                                              f"once each, got {reprlib.repr(auto)}"}
-            core.set_auto_channels(auto)
-            log.info("channels", auto=auto, state=core.state.name)
-        auto_now = core.auto_channels
-        return {"ok": True, "auto": [c for c in CHANNELS if c in auto_now],
-                "state": core.state.name}
+    @contextmanager
+    def _serving(self, control: ControlServer) -> Iterator[None]:
+        """Answer the control socket in a thread of its own while the block runs."""
+        stop = threading.Event()
+        server = threading.Thread(target=control.serve, args=(self.handle_request, stop),
+                                  name="gs-control", daemon=True)
+        server.start()
+        try:
+            yield
+        finally:
+            stop.set()
+            server.join(5.0)
+
+    def _health_section(self, link: VehicleLink, vicon: ViconClient) -> dict[str, object]:
+        """Input health for a status reply: DATA and Vicon rates [Hz] and ages [s], and the
+        battery [V]."""
+        now = time.monotonic()
+        rate, age = vicon.rate_and_age()
+        status = self._front.status
+        return {"data_rate_hz": link.stats().data_rate_hz,
+                "data_age_s": self._front.data_age(now), "vicon_rate_hz": rate,
+                "vicon_age_s": age, "battery_v": status.battery_v,
+                "pilot_enabled": status.pilot_enabled}
 
     def _publish_end(self, telemetry: TelemetryPublisher, link: VehicleLink,
                      vicon: ViconClient) -> None:

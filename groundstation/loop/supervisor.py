@@ -150,6 +150,8 @@ class Observation:
         falling and feel less. This landing check does not use the height
         estimate, which drifts when a landing is flown without Vicon.
     battery_v : battery voltage the X-3D reports [V] (NaN: no STATUS block)
+    land_request : why to land now ("" for no): a client asked, or the commanded flight
+        was idle too long (:mod:`groundstation.loop.commander`); a nominal landing
     """
 
     t: float
@@ -171,6 +173,7 @@ class Observation:
     lift_fraction: float = 1.0
     specific_force_g: float = 1.0
     battery_v: float = math.nan
+    land_request: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -407,6 +410,8 @@ class Supervisor:
         failsafe = self._airborne_failsafe(obs)
         if failsafe is not None:
             return self._go(obs.t, *failsafe, failsafe=True)
+        if obs.land_request:
+            return self._go(obs.t, State.LAND, obs.land_request, nominal=True)
         if obs.takeoff_done:
             return self._go(obs.t, State.TRACK, "take-off height reached", nominal=True)
         timeout = self.limits.takeoff_timeout_s
@@ -421,6 +426,8 @@ class Supervisor:
         failsafe = self._airborne_failsafe(obs)
         if failsafe is not None:
             return self._go(obs.t, *failsafe, failsafe=True)
+        if obs.land_request:
+            return self._go(obs.t, State.LAND, obs.land_request, nominal=True)
         if obs.trajectory_done:
             return self._go(obs.t, State.LAND, "trajectory complete", nominal=True)
         return self.state

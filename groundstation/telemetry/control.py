@@ -15,9 +15,11 @@ Wire format, one JSON object per message (UTF-8, one frame, at most
 
 Nothing a client sends may crash, stall or wedge the flight loop (issue 14):
 
-* The loop calls :meth:`ControlServer.poll` once per tick after its COMMAND is
-  written. Every socket call in it is non-blocking and it handles at most one
-  request; a multipart message is drained :data:`FRAMES_PER_POLL` frames a poll.
+* The daemon answers requests in a thread of its own (:meth:`ControlServer.serve`);
+  a request that needs the flight is handed to the loop, which runs it between two
+  ticks (:mod:`groundstation.loop.api`), so no client ever delays a tick.
+  :meth:`ControlServer.poll` handles at most one request and never blocks; a
+  multipart message is drained :data:`FRAMES_PER_POLL` frames a poll.
 * Every path through a poll is inside one error boundary: a request that is not
   one frame of UTF-8 JSON holding an object gets an error reply and is counted, a
   handler that raises is answered with an error, and a socket that fails is closed
@@ -35,6 +37,7 @@ Nothing a client sends may crash, stall or wedge the flight loop (issue 14):
 from __future__ import annotations
 
 import json
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -72,6 +75,10 @@ several ticks instead of stalling one."""
 
 RECEIVE_QUEUE = 16
 """Requests queued per client (``ZMQ_RCVHWM``): bounds what a client can make us hold."""
+
+SERVE_WAIT_S = 0.05
+"""Longest wait of :meth:`ControlServer.serve` for a request before it checks whether to
+stop [s]."""
 
 REOPEN_RETRY_S = 0.05
 """Wait between attempts to bind a failed socket's endpoint again [s]."""
@@ -254,6 +261,24 @@ class ControlServer(ZmqOwner):
             return
         self._reopen_at = None
         self._stats.reopened += 1
+
+    def serve(self, handler: Callable[[Request], Reply], stop: threading.Event,
+              wait_s: float = SERVE_WAIT_S) -> None:
+        """Answer requests with ``handler`` until ``stop`` is set (the daemon runs this in
+        a thread of its own, so a handler may take its time without delaying a tick);
+        waits at most ``wait_s`` [s] between checks of ``stop``. Never raises."""
+        while not stop.is_set():
+            sock = self._socket
+            if sock is None:  # failed: poll() binds it again when the retry is due
+                self.poll(handler)
+                stop.wait(wait_s)
+                continue
+            try:
+                ready = self._pending is not None or bool(sock.poll(round(1000 * wait_s)))
+            except zmq.ZMQError:
+                ready = True  # poll() meets the failure and binds the socket again
+            if ready:
+                self.poll(handler)
 
     # ------------------------------------------------------------------ counters, closing
     @property

@@ -1,0 +1,439 @@
+"""The run-time API's requests: what a client (:mod:`groundstation.client`, ``gs goto``)
+may ask of a flying daemon, and how each is checked and answered.
+
+Requests are JSON objects on the control socket (:mod:`groundstation.telemetry.control`);
+each reply is ``{"ok": true, ...}`` or ``{"ok": false, "error": why, "kind": kind}`` with
+the kinds of :class:`~groundstation.loop.commander.CommandRefusedError` (and ``busy``
+when the flight kept changing the plan while this one was planned). Frames as
+everywhere: NED earth [m], headings [rad] from north, times [s].
+
+==============  ===========================================================  ==========
+request         fields                                                       flight
+==============  ===========================================================  ==========
+``status``      none                                                         any
+``go_to``       ``position`` [3], ``yaw`` (null: keep), ``duration`` (null:  commanded
+                sized from ``api.speed_m_s`` and the limits)
+``takeoff``     ``height`` above the take-off point [m]: a vertical go_to    commanded
+``follow``      ``trajectory`` (a ``trajectory:`` section: name, center,     commanded
+                size_m, period_s, ...) or ``waypoints`` ([[t, x, y, z(,
+                yaw)], ...]); ``duration`` (null: one lap / the path);
+                ``start_at`` (unix time [s]; null: once at its start)
+``hold``        none: stop as soon as the limits allow, and stay             commanded
+``land``        none: land now (a nominal end)                               any
+``channels``    ``auto`` (see ``gs channels``)                               any
+==============  ===========================================================  ==========
+
+A commanded flight is one with ``trajectory.name: none`` (``gs fly --trajectory none``);
+a flight with a configured trajectory answers status, land and channels and refuses
+motions. Motions are accepted only in TRACK: before take-off is complete, while a
+failsafe acts and after landing began they are refused with kind ``state``.
+
+Threads: :meth:`MotionApi.handle` runs where the request arrived (the control socket's
+thread in the daemon). Everything that reads or changes the flight goes through
+``in_loop``, which runs a function in the flight loop between two ticks and returns its
+result; planning, the expensive part, runs outside the loop (see
+:mod:`groundstation.loop.commander`).
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable, Mapping
+from concurrent.futures import Future
+from concurrent.futures import TimeoutError as FutureTimeout
+from functools import partial
+from typing import Any, ClassVar, Protocol, TypeVar
+
+import numpy as np
+from pydantic import ValidationError
+
+from groundstation.asctec.messages import CHANNELS
+from groundstation.config import GroundStationConfig, TrajectoryConfig, describe_problems
+from groundstation.control.base import heading_of
+from groundstation.control.trajectories import waypoints_from_rows
+from groundstation.control.trajectory import Trajectory
+from groundstation.errors import TrajectoryError
+from groundstation.loop.assemble import motion_limits_from_config, trajectory_for_flight
+from groundstation.loop.commander import (
+    MAX_MOTION_S,
+    PLAN_LEAD_S,
+    Commander,
+    CommandRefusedError,
+    Motion,
+    PlanBase,
+    Planned,
+    plan_follow,
+    plan_go_to,
+    plan_hold,
+)
+from groundstation.loop.core import FlightCore
+from groundstation.loop.supervisor import State
+from groundstation.model.quaternion import rotate
+
+T = TypeVar("T")
+
+
+class InLoop(Protocol):
+    """Runs ``fn`` in the flight loop between two ticks and returns its result."""
+
+    def __call__(self, fn: Callable[[], T], /) -> T: ...
+
+Reply = dict[str, Any]
+
+INSTALL_ATTEMPTS = 3
+"""Plans of one request (each with twice the lead of the last) before it is refused busy."""
+
+MAX_WAYPOINTS = 1000
+"""Most waypoints a ``follow`` request may carry."""
+
+
+IN_LOOP_TIMEOUT_S = 1.0
+"""Longest wait for the flight loop to run a request's part [s]; it runs one within a
+tick (10 ms) unless the loop has stopped."""
+
+RUN_PER_TICK = 4
+"""Most requests' parts the loop runs between two ticks (each well under a millisecond)."""
+
+
+def _in_place(fn: Callable[[], T]) -> T:
+    return fn()
+
+
+class LoopInbox:
+    """Hands functions from other threads to the flight loop and waits for their results.
+
+    While the loop runs (:meth:`open` until :meth:`close`), :meth:`call` queues a function
+    and the loop runs up to :data:`RUN_PER_TICK` of them between two ticks
+    (:meth:`run_pending`); before and after, nothing else touches the flight, and
+    :meth:`call` runs the function at once in the caller's thread.
+    """
+
+    def __init__(self, timeout_s: float = IN_LOOP_TIMEOUT_S) -> None:
+        self._queue: queue.SimpleQueue[tuple[Callable[[], Any], Future[Any]]] = \
+            queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._open = False
+        self._timeout = timeout_s
+
+    def open(self) -> None:
+        """The loop starts: from now on functions run in it."""
+        with self._lock:
+            self._open = True
+
+    def close(self) -> None:
+        """The loop has stopped: run what is queued here, and anything later at once."""
+        with self._lock:
+            self._open = False
+        self.run_pending(limit=None)
+
+    def call(self, fn: Callable[[], T]) -> T:
+        """``fn()``, run by the loop; its exception is raised here. CommandRefusedError
+        ('state') if the loop does not run it within the timeout."""
+        future: Future[T] = Future()
+        with self._lock:
+            queued = self._open
+            if queued:
+                self._queue.put((fn, future))
+        if not queued:
+            return fn()
+        try:
+            return future.result(self._timeout)
+        except FutureTimeout:
+            future.cancel()
+            raise CommandRefusedError("state", f"the flight loop did not take the request "
+                                      f"within {self._timeout:g} s") from None
+
+    def run_pending(self, limit: int | None = RUN_PER_TICK) -> None:
+        """Run up to ``limit`` queued functions (None: all) and hand over their results."""
+        done = 0
+        while limit is None or done < limit:
+            try:
+                fn, future = self._queue.get_nowait()
+            except queue.Empty:
+                return
+            done += 1
+            if not future.set_running_or_notify_cancel():
+                continue  # its caller stopped waiting
+            try:
+                future.set_result(fn())
+            except Exception as exc:  # the caller's to raise, never the loop's
+                future.set_exception(exc)
+
+
+class MotionApi:
+    """Answers API requests for ``core``'s flight.
+
+    in_loop : runs a function in the flight loop and returns its result (the daemon's
+        queue to its loop; by default in the caller's thread, for a core nobody else steps)
+    health : the daemon's input health for status replies (a JSON-able mapping)
+    clock, wall_clock : monotonic and unix time [s]
+    """
+
+    def __init__(self, core: FlightCore, config: GroundStationConfig, *,
+                 in_loop: InLoop = _in_place,
+                 health: Callable[[], Mapping[str, Any]] = dict,
+                 clock: Callable[[], float] = time.monotonic,
+                 wall_clock: Callable[[], float] = time.time) -> None:
+        self.core = core
+        self.config = config
+        self._in_loop = in_loop
+        self._health = health
+        self._clock = clock
+        self._wall = wall_clock
+        self._limits = motion_limits_from_config(config)
+
+    def handle(self, request: Mapping[str, Any]) -> Reply:
+        """The reply to one request (never raises for a client's mistake)."""
+        kind = request.get("request")
+        handler = self._HANDLERS.get(kind) if isinstance(kind, str) else None
+        if handler is None:
+            return _refusal(CommandRefusedError(
+                "request", f"unknown request {str(kind)[:40]!r} "
+                f"(known: {', '.join(sorted(self._HANDLERS))})"))
+        try:
+            return handler(self, request)
+        except CommandRefusedError as exc:
+            return _refusal(exc)
+
+    # ------------------------------------------------------------------ requests
+    def _status(self, request: Mapping[str, Any]) -> Reply:
+        return self._in_loop(self.status)
+
+    def _go_to(self, request: Mapping[str, Any]) -> Reply:
+        _only(request, "position", "yaw", "duration")
+        position = _vector(request.get("position"), "position")
+        yaw = _number(request.get("yaw"), "yaw", optional=True)
+        duration = _duration(request.get("duration"))
+        return self._motion(lambda base: plan_go_to(base, position, yaw, duration,
+                                                    self._limits))
+
+    def _takeoff(self, request: Mapping[str, Any]) -> Reply:
+        _only(request, "height")
+        height = _number(request.get("height"), "height")
+        if not height > 0.0:
+            raise CommandRefusedError("request", f"height {height:g} m: must be above the floor")
+
+        def plan(base: PlanBase) -> Planned:
+            here = base.reference().position
+            target = np.array([here[0], here[1], base.ground[2] - height])
+            return plan_go_to(base, target, None, None, self._limits)
+        return self._motion(plan)
+
+    def _follow(self, request: Mapping[str, Any]) -> Reply:
+        _only(request, "trajectory", "waypoints", "duration", "start_at")
+        duration = _duration(request.get("duration"))
+        start_at = _number(request.get("start_at"), "start_at", optional=True)
+        trajectory, duration_s = self._trajectory(request, duration)
+        received_wall, received = self._wall(), self._clock()
+
+        def plan(base: PlanBase) -> Planned:
+            start = None
+            if start_at is not None:  # unix time -> trajectory time (both advance in TRACK)
+                start = base.start - PLAN_LEAD_S + (start_at - received_wall) \
+                    - (self._clock() - received)
+            return plan_follow(base, trajectory, duration_s, self._limits, start)
+        return self._motion(plan)
+
+    def _hold(self, request: Mapping[str, Any]) -> Reply:
+        _only(request)
+        return self._motion(lambda base: plan_hold(base, self._limits))
+
+    def _land(self, request: Mapping[str, Any]) -> Reply:
+        _only(request)
+
+        def land() -> Reply:
+            state = self.core.state
+            if state not in (State.PREFLIGHT, State.TAKEOFF, State.TRACK):
+                raise CommandRefusedError("state", f"cannot land in {state.name}: "
+                                          + _state_reason(self.core))
+            if state is State.PREFLIGHT:
+                raise CommandRefusedError("state", "not flying yet (PREFLIGHT): stop the "
+                                          "daemon instead (Ctrl-C, systemctl stop)")
+            self.core.request_land("land requested by a client")
+            return {"ok": True, "state": state.name}
+        return self._in_loop(land)
+
+    def _channels(self, request: Mapping[str, Any]) -> Reply:
+        _only(request, "auto")
+
+        def channels() -> Reply:
+            core = self.core
+            if "auto" in request:
+                auto = request["auto"]
+                if not isinstance(auto, list) or not auto or \
+                        any(c not in CHANNELS for c in auto) or len(set(auto)) != len(auto):
+                    raise CommandRefusedError(
+                        "request", f"'auto' must list one or more of {list(CHANNELS)} once "
+                        f"each, got {str(auto)[:80]}")
+                core.set_auto_channels(auto)
+            auto_now = core.auto_channels
+            return {"ok": True, "auto": [c for c in CHANNELS if c in auto_now],
+                    "state": core.state.name}
+        return self._in_loop(channels)
+
+    _HANDLERS: ClassVar[dict[str, Callable[[MotionApi, Mapping[str, Any]], Reply]]] = {
+        "status": _status, "go_to": _go_to, "takeoff": _takeoff, "follow": _follow,
+        "hold": _hold, "land": _land, "channels": _channels,
+    }
+
+    # ------------------------------------------------------------------ motions
+    def _motion(self, plan: Callable[[PlanBase], Planned]) -> Reply:
+        """Plan from the loop's state (outside the loop), install in the loop; again with
+        twice the lead if the loop moved on meanwhile."""
+        received = self._clock()
+        lead = PLAN_LEAD_S
+        for _attempt in range(INSTALL_ATTEMPTS):
+            base = self._in_loop(partial(self._base, lead))
+            planned = plan(base)
+            planned.motion.received = received
+            try:
+                motion = self._in_loop(partial(self._install, planned))
+            except CommandRefusedError as exc:
+                if exc.kind != "busy":
+                    raise
+                lead *= 2.0
+                continue
+            return {"ok": True, "motion": motion.report(), "state": State.TRACK.name}
+        raise CommandRefusedError("busy", "the flight changed its plan while this motion was "
+                                  "planned, three times: try again")
+
+    def _commander(self) -> Commander:
+        commander = self.core.commander
+        if commander is None:
+            raise CommandRefusedError(
+                "state", f"this flight flies its configured trajectory "
+                f"({self.config.trajectory.name}); motions need `gs fly --trajectory none`")
+        return commander
+
+    def _base(self, lead: float) -> PlanBase:
+        """In the loop: what to plan from, or a refusal unless tracking."""
+        commander = self._commander()
+        state = self.core.state
+        if state is not State.TRACK:
+            if state in (State.PREFLIGHT, State.TAKEOFF):
+                reason = f"not airborne yet ({state.name}): wait for TRACK"
+            else:
+                reason = f"{state.name}: {_state_reason(self.core)}"
+            raise CommandRefusedError("state", reason)
+        mission = self.core.mission
+        return commander.base(mission.trajectory_time, mission.heading_offset, state.name,
+                              mission.ground, lead)
+
+    def _install(self, planned: Planned) -> Motion:
+        """In the loop: fly it, if the flight is still tracking."""
+        commander = self._commander()
+        if self.core.state is not State.TRACK:
+            raise CommandRefusedError("state", f"{self.core.state.name}: "
+                                      + _state_reason(self.core))
+        return commander.install(planned, self.core.mission.trajectory_time)
+
+    def _trajectory(self, request: Mapping[str, Any],
+                    duration: float | None) -> tuple[Trajectory, float]:
+        """The shaped, checked trajectory of a ``follow`` request and its duration [s]."""
+        given = [k for k in ("trajectory", "waypoints") if request.get(k) is not None]
+        if len(given) != 1:
+            raise CommandRefusedError("request", "follow needs one of 'trajectory' (a "
+                                      "trajectory section) or 'waypoints' ([[t, x, y, z], ...])")
+        try:
+            if given[0] == "waypoints":
+                rows = request["waypoints"]
+                if not isinstance(rows, list) or len(rows) > MAX_WAYPOINTS or \
+                        not all(isinstance(r, list) for r in rows):
+                    raise CommandRefusedError(
+                        "request", f"waypoints: a list of at most {MAX_WAYPOINTS} rows "
+                        "[t, x, y, z(, yaw)]")
+                section = self.config.trajectory
+                try:
+                    path = waypoints_from_rows(rows, smoothing_s=section.corner_smoothing_s,
+                                               yaw=None, source="waypoints")
+                except TrajectoryError as exc:
+                    raise CommandRefusedError("request", str(exc)) from None
+                return trajectory_for_flight(self.config, path, duration)
+            section_data = request["trajectory"]
+            if not isinstance(section_data, dict):
+                raise CommandRefusedError("request", "trajectory: an object like the "
+                                          "configuration's trajectory section")
+            try:
+                section = TrajectoryConfig.model_validate(section_data)
+            except ValidationError as exc:
+                raise CommandRefusedError("request", "trajectory: " + describe_problems(exc)
+                                          ) from None
+            if section.name in ("none", "waypoints"):
+                raise CommandRefusedError("request", f"trajectory: name {section.name!r}: "
+                                          "give waypoints as 'waypoints'")
+            config = self.config.model_copy(update={"trajectory": section})
+            return trajectory_for_flight(config, None, duration)
+        except TrajectoryError as exc:
+            raise CommandRefusedError("volume" if "outside" in str(exc) else "infeasible",
+                                      str(exc)) from None
+
+    # ------------------------------------------------------------------ status
+    def status(self) -> Reply:
+        """In the loop: the flight now (see :mod:`groundstation.client` for the fields)."""
+        core = self.core
+        est = core.last_estimate
+        reference = core.mission.preview(self._clock(), 0.0)
+        commander = core.commander
+        motion = commander.current if commander is not None else None
+        return {
+            "ok": True, "state": core.state.name, "state_code": int(core.state),
+            "reason": _state_reason(core), "commanded": commander is not None,
+            "estimate": None if est is None else {
+                "position": est.position.tolist(),
+                "velocity": rotate(est.quaternion, est.velocity_body).tolist(),
+                "yaw": heading_of(est.quaternion), "quaternion": est.quaternion.tolist()},
+            "reference": {"position": reference.position.tolist(),
+                          "velocity": reference.velocity.tolist(), "yaw": reference.yaw},
+            "ground": core.mission.ground.tolist(),
+            "motion": None if motion is None else motion.report(),
+            "idle_land_in_s": None if commander is None
+            else commander.idle_land_in(self._clock()),
+            "land_request": core.land_request_reason,
+            "auto": list(core.auto_channels),
+            "health": dict(self._health()),
+        }
+
+
+def _state_reason(core: FlightCore) -> str:
+    transitions = core.supervisor.transitions
+    return transitions[-1].reason if transitions else "waiting for the preflight checks"
+
+
+def _refusal(exc: CommandRefusedError) -> Reply:
+    reason = exc.reason if len(exc.reason) <= 400 else exc.reason[:397] + "..."
+    return {"ok": False, "error": reason, "kind": exc.kind}
+
+
+def _only(request: Mapping[str, Any], *fields: str) -> None:
+    unknown = sorted(set(request) - {"request", *fields})
+    if unknown:
+        raise CommandRefusedError("request", f"unknown field(s) {', '.join(unknown)[:80]} "
+                                  f"(known: {', '.join(fields) or 'none'})")
+
+
+def _number(value: Any, what: str, optional: bool = False) -> Any:
+    if value is None and optional:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float) or \
+            not math.isfinite(value):
+        raise CommandRefusedError("request", f"{what}: must be a finite number, got "
+                                  f"{str(value)[:40]}")
+    return float(value)
+
+
+def _duration(value: Any) -> float | None:
+    duration = _number(value, "duration", optional=True)
+    if duration is not None and not 0.0 < duration <= MAX_MOTION_S:
+        raise CommandRefusedError("request", f"duration {duration:g} s: must be in "
+                                  f"(0, {MAX_MOTION_S:g}]")
+    return duration  # type: ignore[no-any-return]
+
+
+def _vector(value: Any, what: str) -> np.ndarray:
+    if not isinstance(value, list | tuple) or len(value) != 3:
+        raise CommandRefusedError("request", f"{what}: must be 3 numbers (NED, m), got "
+                                  f"{str(value)[:60]}")
+    return np.array([_number(v, what) for v in value])
