@@ -32,9 +32,11 @@
 #   them in a volume. A bind mount must be writable by uid `groundstation`.
 # * No HEALTHCHECK: `gs fly` is one flight, not a long-running service, and
 #   Docker does not act on "unhealthy"; watch a flight with `gs monitor`.
-# * `gs channels` (run-time channel handover) talks to the daemon's control socket,
-#   127.0.0.1:5557 by default and deliberately not exposed: run it on the host
-#   with --network host, or `docker exec <container> gs channels thrust`.
+# * `gs channels` (run-time channel handover) and the run-time API (`gs goto`, `gs land`,
+#   `gs hold`, `gs status`, groundstation.client; fly with `gs fly --trajectory none`)
+#   talk to the daemon's control socket, 127.0.0.1:5557 by default and deliberately not
+#   exposed: run them on the host with --network host, or `docker exec <container> gs
+#   status`. Serving clients on other machines needs CURVE keys (`gs keys`, README).
 # * CPU wake-up latency (realtime.cpu_dma_latency_us): to hold the request, add
 #   `--device /dev/cpu_dma_latency` with the host's udev rule
 #   (config/99-groundstation.rules) giving the container user's group write access

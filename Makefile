@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 lint: install
-	$(BIN)/ruff check groundstation sim_device tests benchmarks
+	$(BIN)/ruff check groundstation sim_device tests benchmarks examples
 
 typecheck: install
 	$(BIN)/mypy

@@ -132,7 +132,9 @@ class Motion:
     superseded (by a later motion) or preempted (by a failsafe), with ``reason``;
     target : where it comes to rest, NED [m]; target_yaw : the heading there [rad] (None:
     kept); duration_s : planned time until at rest [s]; latency_s : request received to
-    the reference starting to move [s] (None until it moved).
+    the reference starting to move [s] (None until it moved); arrived_at : when it
+    arrived, on the daemon's monotonic clock (``time.monotonic()`` on the same machine)
+    [s] (None until then).
     """
 
     id: int
@@ -143,6 +145,7 @@ class Motion:
     target_yaw: float | None
     duration_s: float
     latency_s: float | None
+    arrived_at: float | None = None
 
     @classmethod
     def from_reply(cls, data: Mapping[str, Any]) -> Motion:
@@ -150,7 +153,7 @@ class Motion:
         x, y, z = (float(v) for v in data["target"])
         return cls(int(data["id"]), str(data["kind"]), str(data["state"]),
                    str(data.get("reason", "")), (x, y, z), data.get("target_yaw"),
-                   float(data["duration_s"]), data.get("latency_s"))
+                   float(data["duration_s"]), data.get("latency_s"), data.get("arrived_at"))
 
 
 @dataclass(frozen=True, slots=True)

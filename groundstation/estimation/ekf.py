@@ -49,7 +49,6 @@ from collections.abc import Sequence
 
 import numpy as np
 from scipy.linalg import lapack
-from scipy.stats import chi2
 
 from groundstation.errors import EstimatorError
 from groundstation.estimation.history import History
@@ -94,6 +93,9 @@ class Ekf:
         self._qbias = np.array([p.gyro_bias_walk] * 3 + [p.acc_bias_walk] * 3)
         self._r = p.measurement_variance()  # R is diagonal (6,)
         self._R = np.diag(self._r)
+        from scipy.stats import chi2  # here: scipy.stats takes seconds to import, and the
+        # CLI's commands that never build a filter (gs status, gs goto) should not wait
+
         self._gate = float(chi2.ppf(p.gate_probability, 6))
         self._r_reset = self._r + np.r_[[p.reset_position_sigma**2] * 3,
                                         [p.reset_attitude_sigma**2] * 3]

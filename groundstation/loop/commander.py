@@ -224,11 +224,14 @@ class Motion:
     reason: str = ""
 
     def report(self) -> dict[str, object]:
-        """The motion for a status reply (plain JSON types)."""
+        """The motion for a status reply (plain JSON types; ``received_at`` and
+        ``arrived_at`` on the daemon's monotonic clock [s], which on Linux is the machine's
+        ``CLOCK_MONOTONIC``)."""
         return {"id": self.id, "kind": self.kind, "state": self.state, "reason": self.reason,
                 "target": [float(v) for v in self.target],
                 "target_yaw": self.target_yaw, "duration_s": self.end - self.start,
-                "latency_s": None if self.started is None else self.started - self.received}
+                "latency_s": None if self.started is None else self.started - self.received,
+                "received_at": self.received, "arrived_at": self.arrived}
 
 
 @dataclass(frozen=True, slots=True)

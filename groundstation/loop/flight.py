@@ -88,9 +88,9 @@ def summary_lines(summary: FlightSummary) -> list[str]:
         f"{1e3 * gc.longest_full_s:.2f} ms)")
     c = summary.control
     if any(c.values()):
-        lines.append(f"  control socket: {c.get('answered', 0)} requests answered, "
-                     + ", ".join(f"{n} {name.replace('_', ' ')}" for name, n in c.items()
-                                 if n and name != "answered"))
+        lines.append(", ".join([f"  control socket: {c.get('answered', 0)} requests answered",
+                                *(f"{n} {name.replace('_', ' ')}" for name, n in c.items()
+                                  if n and name != "answered")]))
     link = link_figures(summary)
     if link is not None:
         lines.append(f"  serial link ({link.protocol}): in {link.in_bytes_per_s:.0f} B/s "
