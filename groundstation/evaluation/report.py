@@ -2,7 +2,9 @@
 
 :func:`report_flight` is the whole of ``gs report``: one logged flight (real or
 against the virtual lab, with its truth file) -> ``report.md``,
-``metrics.json`` and ``flight.png``. The suite's report
+``metrics.json``, the overview ``flight.png`` and the figure set of
+:mod:`.flight_figures` (position, top view, attitude, rates, sticks, estimator,
+health, battery, timing). The suite's report
 (:mod:`sim_device.evaluation.suite`) uses the same writers.
 """
 
@@ -18,10 +20,17 @@ from typing import Any
 import numpy as np
 
 from groundstation import __version__
+from groundstation.evaluation.flight_figures import (
+    BENCHMARK_TARGETS,
+    FIGURES,
+    FlightLog,
+    write_flight_figures,
+)
 from groundstation.evaluation.metrics import SETTLING_BAND, track_clock
-from groundstation.evaluation.plotting import flight_figure
+from groundstation.evaluation.plotting import pyplot
 from groundstation.evaluation.record import FlightRecord, record_from_log
 from groundstation.evaluation.scoring import StepSpec, flight_metrics
+from groundstation.loop.recorder import read_flight
 from groundstation.loop.supervisor import State, Transition
 
 # (metrics key, column heading, scale, format)
@@ -144,32 +153,68 @@ def step_from_reference(record: FlightRecord, min_step_m: float = 0.01) -> StepS
 
 @dataclass(frozen=True)
 class FlightReport:
-    """What :func:`report_flight` wrote and computed."""
+    """What :func:`report_flight` wrote and computed.
+
+    figure : the overview (``flight.png``), None without figures; figures : every PNG
+    written (:data:`~.flight_figures.FIGURES` in order, the overview first)
+    """
 
     record: FlightRecord
     metrics: dict[str, Any]
     report_md: Path
     metrics_json: Path
     figure: Path | None
+    figures: tuple[Path, ...] = ()
+
+
+def figures_section(figures: Sequence[Path], innovations: bool) -> list[str]:
+    """report.md's list of the figures (Markdown lines), each with what it shows."""
+    described = {stem: text for stem, text, _ in FIGURES}
+    lines = ["## Figures", "",
+             "Time axes: seconds since the first logged tick; dashed vertical lines are the "
+             "supervisor's transitions (red: not a step of a nominal flight), named along "
+             "the top of each figure.", ""]
+    lines += [f"- [{p.name}]({p.name}): {described.get(p.stem, '')}" for p in figures]
+    if not innovations:
+        lines += ["", "The flight log records no estimator innovations: estimator.png shows "
+                  "the Vicon pose minus the estimate of the tick before it (moved to the "
+                  "pose time), an innovation proxy, with the covariance diagonal's sigmas. "
+                  "Nor does it record the Vicon poses the filter's gate rejected: health.png "
+                  "counts the ticks that had no pose at all."]
+    t = BENCHMARK_TARGETS
+    lines += ["", f"timing.png marks the real-time benchmark's p99 targets "
+              f"(benchmarks/bench_flight.py): compute {t.compute_p99_ms:g} ms, jitter "
+              f"{t.jitter_p99_ms:g} ms, DATA-to-COMMAND latency {t.latency_p99_ms:g} ms, and "
+              "the configured DATA period."]
+    for p in figures:
+        lines += ["", f"![{p.stem}]({p.name})"]
+    return lines
 
 
 def report_flight(log: str | Path, truth: str | Path | None = None,
                   out_dir: str | Path | None = None, *, figures: bool = True) -> FlightReport:
-    """Metrics and figure of one recorded flight (``gs report LOG [--truth T] [--out DIR]``).
+    """Metrics and figures of one recorded flight (``gs report LOG [--truth T] [--out DIR]``).
 
     log : flight-log directory; truth : the virtual lab's truth file (.npz) of the
     same run, else the metrics are computed from the estimate and labelled so;
-    out_dir : default ``<log>/report``. RecorderError if the files cannot be read
-    or do not belong together; GroundStationError if figures are asked for and
-    matplotlib is missing.
+    out_dir : default ``<log>/report``. Writes metrics.json, report.md and, with
+    ``figures``, the figure set (:data:`~.flight_figures.FIGURES`: the overview
+    flight.png, position.png, ...).
+    RecorderError if the files cannot be read or do not belong together;
+    GroundStationError if figures are asked for and matplotlib is missing (checked
+    before anything is written).
     """
     record = record_from_log(log, truth)
+    rows, meta, config_text = read_flight(log)
+    if figures:
+        pyplot()  # matplotlib missing: fail before writing anything
     out = Path(out_dir) if out_dir is not None else Path(log) / "report"
     out.mkdir(parents=True, exist_ok=True)
     metrics = flight_metrics(record, step=step_from_reference(record))
     t0 = float(record.t[0])
-    figure = flight_figure(record, out / "flight.png", f"flight {Path(log).name}") \
-        if figures else None
+    flight_log = FlightLog.of(rows, meta, config_text, record, f"flight {Path(log).name}")
+    written = tuple(write_flight_figures(flight_log, out)) if figures else ()
+    figure = written[0] if written else None
     mj = write_json(out / "metrics.json", {
         "format": "groundstation flight report", "version": __version__, "log": str(log),
         "truth_file": str(truth) if truth is not None else None, "metrics": metrics,
@@ -181,8 +226,8 @@ def report_flight(log: str | Path, truth: str | Path | None = None,
              f"- timing: {record.timing_source}",
              f"- states: {states_line(record.transitions)}", "",
              table, DEFINITIONS]
-    if figure is not None:
-        lines += ["", f"![flight]({figure.name})", ""]
+    if written:
+        lines += ["", *figures_section(written, flight_log.has_innovations)]
     md = out / "report.md"
-    md.write_text("\n".join(lines), encoding="utf-8")
-    return FlightReport(record, metrics, md, mj, figure)
+    md.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return FlightReport(record, metrics, md, mj, figure, written)
