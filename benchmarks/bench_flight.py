@@ -26,9 +26,11 @@ child process:
 for the whole run.
 
 Targets: vehicle-side latency p50 <= 2 ms and p99 <= 3 ms on a quiet machine, no
-COMMAND gap over 50 ms in 30 consecutive flights, also under ``--load 2``; compute p99
-<= 200 us, jitter p99 <= 1 ms, daemon-side latency p99 <= 2 ms, commands at the
-configured rate, RSS growth <= a few MB over 30 minutes.
+COMMAND gap over 50 ms in 30 consecutive flights, also under ``--load 2``; jitter p99
+<= 1 ms, daemon-side latency p99 <= 2 ms, commands at the configured rate, RSS growth
+<= a few MB over 30 minutes. Compute (DATA in hand to COMMAND written) is printed but has
+no target of its own: the old 200 us is retired, because on the 57600-baud link the
+latency the vehicle sees, of which compute is a part, is the binding constraint.
 """
 
 from __future__ import annotations
@@ -208,7 +210,7 @@ def report_one(flight: Flight, args: argparse.Namespace, samples: list[tuple[flo
           f"({summary.commands_sent / summary.duration_s:.1f}/s over the whole run), "
           f"keep-alive resends {summary.keepalive_resends}")
     print(f"compute  p50 {p['compute'][0] * 1e6:7.0f} us   p99 {p['compute'][1] * 1e6:7.0f} us"
-          f"   max {summary.compute.max * 1e6:7.0f} us   (target p99 <= 200 us)")
+          f"   max {summary.compute.max * 1e6:7.0f} us   (part of the latency below)")
     print(f"jitter   p50 {p['jitter'][0] * 1e3:7.3f} ms   p99 {p['jitter'][1] * 1e3:7.3f} ms"
           f"   max {summary.jitter.max * 1e3:7.3f} ms   (target p99 <= 1 ms)")
     print(f"latency  p50 {p['latency'][0] * 1e3:7.3f} ms   p99 {p['latency'][1] * 1e3:7.3f} ms"

@@ -227,7 +227,8 @@ def test_limits_come_from_the_flights_config(flown: tuple[Path, Path]) -> None:
     odd = LogLimits.from_config("serial: {command_rate_hz: 100}\nsafety: {battery_land_v: null}\n")
     assert odd.command_period_s == pytest.approx(0.01) and odd.battery_land_v is None
     assert LogLimits.from_config(": not yaml [").data_period_s == lim.data_period_s
-    assert BENCHMARK_TARGETS.compute_p99_ms < BENCHMARK_TARGETS.latency_p99_ms
+    # compute has no target of its own (the 200 us one is retired): latency is what counts
+    assert BENCHMARK_TARGETS.compute_p99_ms is None and BENCHMARK_TARGETS.latency_p99_ms
 
 
 def test_without_matplotlib_the_metrics_are_still_written(

@@ -47,18 +47,20 @@ Rows = npt.NDArray[np.void]
 
 @dataclass(frozen=True)
 class TimingTargets:
-    """Daemon-side p99 targets of one control tick [ms]."""
+    """Daemon-side p99 targets of one control tick [ms] (None: no target of its own)."""
 
-    compute_p99_ms: float
-    jitter_p99_ms: float
-    latency_p99_ms: float
+    compute_p99_ms: float | None
+    jitter_p99_ms: float | None
+    latency_p99_ms: float | None
 
 
-BENCHMARK_TARGETS = TimingTargets(compute_p99_ms=0.2, jitter_p99_ms=1.0, latency_p99_ms=2.0)
+BENCHMARK_TARGETS = TimingTargets(compute_p99_ms=None, jitter_p99_ms=1.0, latency_p99_ms=2.0)
 """The real-time benchmark's daemon-side targets, drawn on ``timing.png``.
 
-From ``benchmarks/bench_flight.py`` (module docstring, "Targets: ... compute p99 <= 200 us,
-jitter p99 <= 1 ms, daemon-side latency p99 <= 2 ms") and the README's "Benchmarks"
+From ``benchmarks/bench_flight.py`` (module docstring, "Targets: ... jitter p99 <= 1 ms,
+daemon-side latency p99 <= 2 ms"; compute has none since the old 200 us was retired: the
+DATA-to-COMMAND latency, of which it is a part, is what the vehicle sees) and the README's
+"Benchmarks"
 section, which also reports what the development VM measured against them on a quiet
 60 s square: compute p99 1.0 ms (target not met), jitter p99 0.13 ms, DATA-to-COMMAND
 latency p99 1.25 ms. Compute: DATA sample in hand to COMMAND written; jitter: tick start
@@ -778,8 +780,9 @@ def timing_figure(log: FlightLog) -> Any:
         v = 1e3 * log.col("compute_time" if key == "compute" else key)
         ax.plot(t, v, ".", ms=1.5, color="C0",
                 label=f"{label}\np50 {_p(v, 50):.2f} ms, p99 {_p(v, 99):.2f} ms")
-        ax.axhline(target, color="C3", ls="--", lw=1.0,
-                   label=f"benchmark target: p99 <= {target:g} ms")
+        if target is not None:
+            ax.axhline(target, color="C3", ls="--", lw=1.0,
+                       label=f"benchmark target: p99 <= {target:g} ms")
         if with_period:
             ax.axhline(period, color="C2", ls="-.", lw=1.0,
                        label=f"DATA period {period:g} ms (config)")
