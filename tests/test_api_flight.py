@@ -65,11 +65,16 @@ def test_a_flight_driven_only_by_the_client(tmp_path: Path) -> None:
         out: dict[str, FlightSummary] = {}
         runner = threading.Thread(target=lambda: out.setdefault("s", daemon.run()))
         runner.start()
+        follower: threading.Thread | None = None
         try:
             assert daemon.ready.wait(10.0)
             assert daemon.control_endpoint is not None and daemon.telemetry_endpoint
             gs = Client(daemon.control_endpoint, telemetry=daemon.telemetry_endpoint,
                         timeout_s=5.0)
+            # a third client follows the supervisor's transitions over the telemetry
+            seen: list[tuple[str, str]] = []
+            follower = threading.Thread(target=lambda: seen.extend(gs.transitions(30.0)))
+            follower.start()
             # before take-off: refused, the vehicle is not in the air yet
             with pytest.raises(NotNow, match="not airborne yet"):
                 gs.go_to(GOALS[0])
@@ -130,10 +135,14 @@ def test_a_flight_driven_only_by_the_client(tmp_path: Path) -> None:
             raise
         finally:
             runner.join(60.0)
+            if follower is not None:
+                follower.join(10.0)
         time.sleep(0.3)  # the lab applies the final COMMAND
     summary = out["s"]
     assert final is not None and final.state == "DONE" and final.outcome == "COMPLETED"
     assert summary.outcome is Outcome.COMPLETED and summary.final_state is State.DONE
+    assert seen == [("PREFLIGHT", "TAKEOFF"), ("TAKEOFF", "TRACK"), ("TRACK", "LAND"),
+                    ("LAND", "DISARM"), ("DISARM", "DONE")]
     assert summary.reason.startswith("landed") and any(
         tr.reason == "land requested by a client" for tr in summary.transitions)
     # arrival judged from the ground truth: within 5 cm of each goal once the client
