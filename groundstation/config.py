@@ -690,6 +690,9 @@ class LoggingConfig(ConfigModel):
     level: Literal["debug", "info", "warning", "error"] = "info"
     format: Literal["auto", "console", "json"] = "auto"  # auto: console on a TTY, else JSON
     flight_log_dir: Path = Path("flightlogs")
+    mcap: bool = False
+    # also write the flight as flight.mcap (gs export --format mcap) beside flight.npy
+    # when the daemon closes its log (needs the analysis extra; the loop never waits)
 
 
 class RealtimeConfig(ConfigModel):

@@ -33,7 +33,7 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
         "trajectory.name": "hover", "vicon.port": free_udp_port(),
         "telemetry.endpoint": "tcp://127.0.0.1:*", "logging.flight_log_dir": str(tmp_path),
         "telemetry.control_endpoint": "tcp://127.0.0.1:*",
-        "sim.truth_file": str(tmp_path / "truth.npz"),
+        "sim.truth_file": str(tmp_path / "truth.npz"), "logging.mcap": True,
     })
     # The virtual vehicle in its own process: a stall of this one (a loaded machine)
     # cannot stop the vehicle's clock and fake a watchdog expiry, which would make the
@@ -115,6 +115,20 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     assert np.all((rows["battery_v"] > 11.7) & (rows["battery_v"] <= 11.8))
     tracking = rows["state"] == int(State.TRACK)
     assert np.all(rows["vehicle_flags"][tracking] & 0x01)  # the X-3D applied our commands
+    # logging.mcap: the flight as MCAP beside its log, every channel decoding as JSON
+    import json
+
+    from mcap.reader import make_reader
+
+    assert summary.mcap == str(Path(summary.log_dir) / "flight.mcap")
+    with open(summary.mcap, "rb") as fh:
+        reader = make_reader(fh)
+        per_topic: dict[str, int] = {}
+        for _schema, channel, message in reader.iter_messages():
+            assert isinstance(json.loads(message.data), dict)
+            per_topic[channel.topic] = per_topic.get(channel.topic, 0) + 1
+    assert per_topic["/imu"] == len(rows) and per_topic["/supervisor"] == len(rows)
+    assert {"/estimate", "/vicon", "/command", "/vehicle", "/pose/estimate"} <= set(per_topic)
     link = meta["outcome"].pop("link")
     assert meta["outcome"] == {"outcome": "COMPLETED", "exit_code": 0, "final_state": "DONE",
                                "reason": summary.reason, "failsafe_transitions": [],

@@ -53,6 +53,7 @@ from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import asdict, dataclass, field
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 import structlog
@@ -143,6 +144,8 @@ class FlightSummary:
     link: LinkStats | None = None
     protocol: str = "x3d"
     baud: int = 57600
+    mcap: str = ""
+    """With ``logging.mcap``: the flight's MCAP file, or why it was not written."""
 
     def percentiles(self) -> dict[str, tuple[float, float]]:
         """p50 and p99 of compute time, |jitter| and latency [s]."""
@@ -270,6 +273,8 @@ class FlightDaemon:
             self._stats.collector = pacer.stats
             summary = self._summary()
             recorder.meta["outcome"] = _outcome_meta(summary)
+        if cfg.logging.mcap and self.log_dir:  # the log is closed: the vehicle is the pilot's
+            summary.mcap = _write_mcap(Path(self.log_dir))
         return summary
 
     # ------------------------------------------------------------------ the loop
@@ -553,6 +558,20 @@ def link_figures(summary: FlightSummary) -> LinkFigures | None:
         summary.protocol, seconds, stats.bytes_in / seconds, stats.bytes_out / seconds,
         stats.bytes_in / seconds / line, stats.bytes_out / seconds / line,
         sum(stats.rejections.values()), stats.unexpected_data, **ll)  # type: ignore[arg-type]
+
+
+def _write_mcap(log_dir: Path) -> str:
+    """``log_dir/flight.mcap`` from the closed flight log (``logging.mcap``); its path, or
+    why it was not written (logged: a flight's MCAP is a convenience, its log the record)."""
+    from groundstation.export import export_mcap
+
+    out = log_dir / "flight.mcap"
+    try:
+        export_mcap(log_dir, out)
+    except Exception as exc:  # the flight is over and its log safe: only the copy is lost
+        log.warning("flight.mcap not written", error=str(exc))
+        return f"not written: {exc}"
+    return str(out)
 
 
 def _drain(vicon: ViconClient) -> list[Pose]:

@@ -102,6 +102,8 @@ def summary_lines(summary: FlightSummary) -> list[str]:
                          f"acknowledgements {link.acks} ({link.acks_missing} missing), "
                          f"command->ack p50/p99 {link.ack_p50_ms:.1f}/{link.ack_p99_ms:.1f} ms")
     lines.append(f"  flight log: {summary.log_dir}")
+    if summary.mcap:
+        lines.append(f"  MCAP (logging.mcap): {summary.mcap}")
     return lines
 
 
