@@ -17,10 +17,10 @@ Example (``examples/fly_square.py`` flies a square)::
 
     from groundstation.client import Client
 
-    with Client() as gs:
-        gs.wait_for_state("TRACK", timeout=30)
-        gs.go_to([0.5, 0.0, -1.0], wait=True)
-        gs.land(wait=True)
+    gs = Client()  # nothing to close: every request opens and closes its own socket
+    gs.wait_for_state("TRACK", timeout=30)
+    gs.go_to([0.5, 0.0, -1.0], wait=True)
+    gs.land(wait=True)
 
 Every request is one JSON message on the daemon's control socket
 (``telemetry.control_endpoint``; see :mod:`groundstation.loop.api` for the wire format);
@@ -31,11 +31,10 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
-from typing import Any, Self
+from typing import Any
 
 from groundstation.errors import GroundStationError
 from groundstation.telemetry.client import TelemetryClient
@@ -251,16 +250,6 @@ class Client:
         if server_key is not None and client_key is not None:
             self._curve = load_client_keys(client_key, server_key)
 
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
-
-    def close(self) -> None:
-        """Nothing to release: every request opens and closes its own socket."""
-
     # ------------------------------------------------------------------ requests
     def request(self, request: Mapping[str, Any]) -> dict[str, Any]:
         """Send one request and return the reply; raises the :class:`Refused` subclass of
@@ -366,41 +355,50 @@ class Client:
         Preempted if a failsafe or a later motion ended it, WaitTimeout after ``timeout``
         [s]."""
         wanted = motion.id if isinstance(motion, Motion) else motion
-        deadline = time.monotonic() + timeout
-        while True:
-            status = self.status()
+
+        def arrived(status: Status) -> bool:
+            nonlocal wanted
             current = status.motion
             if wanted is None and current is not None:
                 wanted = current.id
             if current is not None and current.id == wanted and current.state == "arrived":
-                return status
+                return True
             if current is not None and wanted is not None and \
                     (current.id > wanted or current.state in ("superseded", "preempted")):
                 why = current.reason if current.id == wanted else \
                     f"replaced by motion {current.id}"
                 raise Preempted(f"motion {wanted} did not arrive: {why}", status)
-            if status.state != "TRACK" and status.state not in ("PREFLIGHT", "TAKEOFF"):
+            if status.state not in ("TRACK", "PREFLIGHT", "TAKEOFF"):
                 raise Preempted(f"motion {wanted} did not arrive: {status.state} "
                                 f"({status.reason})", status)
-            if time.monotonic() > deadline:
-                raise WaitTimeout(f"motion {wanted} has not arrived within {timeout:g} s "
-                                  f"(state {status.state}, error {status.error_m} m)")
-            time.sleep(POLL_S)
+            return False
+        return self._poll(arrived, timeout, lambda s: f"motion {wanted} has not arrived "
+                          f"within {timeout:g} s (state {s.state}, error {s.error_m} m)")
 
     def wait_for_state(self, *states: str, timeout: float = 30.0) -> Status:
         """Block until the supervisor is in one of ``states``; WaitTimeout after ``timeout``
         [s], and Preempted at once if the flight ended in another state."""
-        deadline = time.monotonic() + timeout
-        while True:
-            status = self.status()
+        def reached(status: Status) -> bool:
             if status.state in states:
-                return status
+                return True
             if status.state in ENDED_STATES:
                 raise Preempted(f"the flight ended in {status.state} ({status.reason}), "
                                 f"not {'/'.join(states)}", status)
+            return False
+        return self._poll(reached, timeout, lambda s: f"not in {'/'.join(states)} within "
+                          f"{timeout:g} s (state {s.state}: {s.reason})")
+
+    def _poll(self, done: Callable[[Status], bool], timeout: float,
+              late: Callable[[Status], str]) -> Status:
+        """The status, every :data:`POLL_S`, until ``done`` says so (or raises); WaitTimeout
+        with ``late``'s message after ``timeout`` [s]."""
+        deadline = time.monotonic() + timeout
+        while True:
+            status = self.status()
+            if done(status):
+                return status
             if time.monotonic() > deadline:
-                raise WaitTimeout(f"not in {'/'.join(states)} within {timeout:g} s "
-                                  f"(state {status.state}: {status.reason})")
+                raise WaitTimeout(late(status))
             time.sleep(POLL_S)
 
     # ------------------------------------------------------------------ telemetry
