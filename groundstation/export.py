@@ -48,7 +48,8 @@ from groundstation.loop.recorder import COLUMN_UNITS, FLAT_DTYPE, RECORD_DTYPE, 
 
 CHANNELS: dict[str, tuple[str, ...]] = {
     "/imu": ("imu_t", "imu_counter", "gyro_counts", "acc_counts", "gyro", "acc"),
-    "/vicon": ("vicon_valid", "vicon_t", "vicon_position", "vicon_quaternion"),
+    "/vicon": ("vicon_valid", "vicon_t", "vicon_position", "vicon_quaternion", "vicon_nis",
+               "vicon_refused"),
     "/estimate": ("est_position", "est_quaternion", "est_velocity_body", "est_omega",
                   "est_gyro_bias", "est_acc_bias", "est_covariance_diag"),
     "/reference": ("ref_position", "ref_velocity", "ref_yaw", "ref_acceleration", "ref_jerk",
@@ -243,7 +244,8 @@ _BATTERY = Precision(3)
 # 1 mV: STATUS carries uint16 [mV], LL_STATUS int16 [mV] (docs/protocol.md): lossless.
 _COVARIANCE = Precision(4, significant=True)
 # 4 significant digits: the diagonal spans 1e-12..1 in mixed units; a statistic, not a
-# measurement, so its relative precision (5e-4) is what matters.
+# measurement, so its relative precision (5e-4) is what matters. The same for the NIS
+# (a chi-square statistic compared with a gate of about 27).
 
 CSV_PRECISION: dict[str, Precision] = {
     "t": _TIME, "imu_t": _TIME, "vicon_t": _TIME,
@@ -252,7 +254,7 @@ CSV_PRECISION: dict[str, Precision] = {
     "vicon_position": _POSITION, "vicon_quaternion": _QUATERNION,
     "est_position": _POSITION, "est_quaternion": _QUATERNION, "est_velocity_body": _RATE,
     "est_omega": _IMU, "est_gyro_bias": _BIAS, "est_acc_bias": _BIAS,
-    "est_covariance_diag": _COVARIANCE,
+    "est_covariance_diag": _COVARIANCE, "vicon_nis": _COVARIANCE,
     **{f"{prefix}_{name}": precision for prefix in ("ref", "preview")
        for name, precision in (("position", _POSITION), ("velocity", _RATE), ("yaw", _ANGLE),
                                ("acceleration", _RATE), ("jerk", _RATE),

@@ -139,7 +139,7 @@ def test_without_a_status_block_the_battery_is_nan(tmp_path: Path) -> None:
     assert np.isnan(row["battery_v"]) and row["vehicle_flags"] == row["vehicle_mask"] == 0
     assert row["pilot_enabled"]
     assert row["pilot_thrust"] == row["pilot_yaw"] == 0  # no RC block: no pilot sticks
-    assert meta["schema_version"] == 4
+    assert meta["schema_version"] == 5
     assert meta["units"]["battery_v"] == "V" and meta["units"]["vehicle_mask"] == "bits"
 
 
@@ -323,7 +323,8 @@ def test_create_reports_an_unwritable_log_dir(tmp_path: Path) -> None:
 
 def test_a_schema_3_log_is_read_with_the_new_columns_filled(tmp_path: Path) -> None:
     """Logs recorded before the pilot's sticks were logged (schema 3: no pilot columns,
-    uint16 counts) stay readable: every old column intact, the new ones zero."""
+    uint16 counts, no estimator verdicts) stay readable: every old column intact, the new
+    ones zero (NaN for the NIS)."""
     rng = np.random.default_rng(5)
     ticks = [make_tick(rng, k) for k in range(20)]
     with FlightRecorder.create(tmp_path, CONFIG) as rec:
@@ -332,8 +333,8 @@ def test_a_schema_3_log_is_read_with_the_new_columns_filled(tmp_path: Path) -> N
     current = np.load(rec.path)
     old_fields = [(name, "<u2" if name.endswith("_counts_x") or name.endswith("_counts_y")
                    or name.endswith("_counts_z") else current.dtype[name].str)
-                  for name in current.dtype.names or () if not name.startswith("pilot_")
-                  or name == "pilot_enabled"]
+                  for name in current.dtype.names or () if (not name.startswith("pilot_")
+                  or name == "pilot_enabled") and name not in ("vicon_nis", "vicon_refused")]
     old = np.zeros(len(current), dtype=old_fields)
     for name, _ in old_fields:
         old[name] = current[name]
@@ -347,6 +348,7 @@ def test_a_schema_3_log_is_read_with_the_new_columns_filled(tmp_path: Path) -> N
         np.testing.assert_array_equal(row["gyro_counts"], args["gyro_counts"])
         assert row["cmd_thrust"] == args["command"].thrust
         assert row["pilot_thrust"] == 0
+        assert np.isnan(row["vicon_nis"]) and row["vicon_refused"] == 0  # schema 5's columns
     np.save(rec.path, np.zeros(3, dtype=[("unknown", "<f8")]))
     with pytest.raises(RecorderError, match="cannot be read"):
         read_flight(rec.directory)

@@ -11,6 +11,7 @@ read back from each figure's matplotlib artists as it is saved.
 from __future__ import annotations
 
 import json
+import math
 import struct
 import sys
 from pathlib import Path
@@ -63,8 +64,8 @@ Drawn = tuple[list[list[tuple[float, str]]], list[str], list[str]]
 """Per time axis of a figure, the transition lines (x [s], state name); the labels on top;
 the time axes' x labels."""
 TIME_AXES = {"flight": 2, "position": 4, "attitude": 3, "rates": 3, "commands": 4,
-             "estimator": 7, "health": 6, "battery": 1, "timing": 3, "top_view": 0}
-"""Time axes per figure (the estimator's seventh: estimate minus truth)."""
+             "estimator": 8, "health": 6, "battery": 1, "timing": 3, "top_view": 0}
+"""Time axes per figure (the estimator's: the NIS, and with truth estimate minus truth)."""
 
 
 @pytest.fixture(scope="module")
@@ -110,7 +111,7 @@ def test_every_figure_is_written_as_a_png_and_listed(report: FlightReport) -> No
         width, height = png_size(png)
         assert 700 <= width <= 2000 and 300 <= height <= 2500, (png, width, height)
         assert f"[{png.name}]({png.name})" in md and f"]({png.name})" in md
-    assert "records no estimator innovations" in md  # the schema has none: said so
+    assert "NIS of every pose the estimator judged" in md  # schema 5 records it
     assert json.loads(report.metrics_json.read_text())["metrics"]["final_state"] == "DONE"
 
 
@@ -242,3 +243,22 @@ def test_without_matplotlib_the_metrics_are_still_written(
     assert list(out.glob("*.png")) == []
     assert "## Figures" not in (out / "report.md").read_text()
     assert State.DONE.name in (out / "metrics.json").read_text()
+
+
+def test_the_log_records_a_consistent_filters_nis(flown: tuple[Path, Path]) -> None:
+    """The virtual lab's noise is the filter's noise model, so the NIS of the poses it
+    judged while hovering follows the chi-square distribution with 6 dof: its median is
+    scipy's chi2(6).median() within the spread of a sample median of this size."""
+    from scipy.stats import chi2
+
+    from groundstation.loop.recorder import read_flight
+
+    rows, _, _ = read_flight(flown[0])
+    nis = rows["vicon_nis"][(rows["state"] == int(State.TRACK)) & np.isfinite(rows["vicon_nis"])]
+    assert nis.size > 100
+    median = float(chi2.median(6))
+    # the sample median's std is sqrt(p (1 - p) / n) / f(median); four of them and a margin
+    # for the poses' correlation through the filter (a noise model off by 2x moves it ~2.7)
+    spread = math.sqrt(0.25 / nis.size) / float(chi2.pdf(median, 6))
+    assert abs(float(np.median(nis)) - median) < 4 * spread + 0.5, (np.median(nis), spread)
+    assert rows["vicon_refused"][rows["state"] == int(State.TRACK)].sum() == 0

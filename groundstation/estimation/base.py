@@ -64,6 +64,13 @@ class Estimator(Protocol):
         """Counters and consistency figures for telemetry."""
         ...
 
+    @property
+    def verdicts(self) -> tuple[int, int, float]:
+        """Poses judged against the estimate so far (fused or gated: those with a NIS),
+        poses refused so far (for any reason), and the NIS of the last one judged (NaN
+        before one): the cheap running counts the flight log records per tick."""
+        ...
+
 
 class PoseHoldEstimator:
     """The template estimator: reports the last Vicon pose as the state.
@@ -100,6 +107,11 @@ class PoseHoldEstimator:
         self._pose = pose
         self._updates += 1
         return UpdateResult(True, float("nan"), "ok")
+
+    @property
+    def verdicts(self) -> tuple[int, int, float]:
+        """No innovations: every pose is taken as it is."""
+        return 0, 0, float("nan")
 
     def estimate(self) -> StateEstimate:
         """The held pose as an estimate (raises ``LookupError`` before a pose)."""

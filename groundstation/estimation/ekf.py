@@ -293,6 +293,14 @@ class Ekf:
         )
 
     @property
+    def verdicts(self) -> tuple[int, int, float]:
+        """Poses judged (fused or gated), poses refused for any reason, and the last NIS:
+        see :attr:`groundstation.estimation.base.Estimator.verdicts`."""
+        refused = (self.gated + self.repeated_poses + self.lost_tracking + self.too_old
+                   + self.future + self.invalid_poses + self.implausible_poses)
+        return self.updates + self.gated, refused, self.last_nis
+
+    @property
     def time_since_fix(self) -> float:
         """Filter time minus the newest fused pose's time [s] (inf before
         :meth:`initialise`): how long the estimate has gone without Vicon, whether

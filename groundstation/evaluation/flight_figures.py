@@ -110,6 +110,7 @@ class LogLimits:
     battery_land_v : failsafe landing voltage [V] (None: no battery failsafe)
     k_rate : body rate per stick unit, (roll, pitch, yaw) [rad/s per RC unit]
     volume : the tracked volume, ((x_min, x_max), (y_min, y_max)) NED [m]
+    gate_probability : the estimator's chi-square gate on a pose's NIS (6 dof)
     """
 
     data_period_s: float
@@ -121,6 +122,7 @@ class LogLimits:
     battery_land_v: float | None
     k_rate: tuple[float, float, float]
     volume: tuple[tuple[float, float], tuple[float, float]]
+    gate_probability: float = 0.9999
 
     @classmethod
     def from_config(cls, text: str) -> LogLimits:
@@ -164,6 +166,7 @@ class LogLimits:
             max_vicon_delay_s=num("estimator", "max_vicon_delay_s"),
             battery_land_v=float(land) if isinstance(land, int | float) else None,
             k_rate=(kx, ky, kz), volume=((vx[0], vx[1]), (vy[0], vy[1])),
+            gate_probability=num("estimator", "gate_probability"),
         )
 
 
@@ -236,7 +239,8 @@ def vicon_residuals(rows: Rows) -> tuple[FloatArray, FloatArray]:
     """Vicon pose minus the estimate predicted to it: position (N, 3) NED [m] and attitude
     (N, 3) body rotation vector [rad]; NaN on ticks without a pose (or estimate).
 
-    The log does not record the filter's innovations. This proxy compares each pose with
+    The log records the filter's NIS per pose (``vicon_nis``, schema 5 on), not its
+    innovation vector; for the vector in metres and degrees this proxy compares each pose with
     the estimate of the tick *before* it was used (which has not seen it), moved to the
     pose's time ``vicon_t`` with that tick's velocity (``eCb v_body``); the attitude
     residual is ``conj(q_est) ⊗ q_vicon``. Unlike the filter's own innovation it ignores
@@ -341,8 +345,9 @@ class FlightLog:
 
     @property
     def has_innovations(self) -> bool:
-        """True when the log records the filter's innovations (this schema does not)."""
-        return any("innov" in n for n in self.rows.dtype.names or ())
+        """True when the log records the estimator's NIS per pose (schema 5 on; an older
+        log read into this schema has the column, all NaN)."""
+        return bool(np.isfinite(self.col("vicon_nis")).any())
 
 
 # ------------------------------------------------------------------ figure helpers
@@ -619,14 +624,17 @@ def estimator_figure(log: FlightLog) -> Any:
     minus truth where known, standard deviations from the covariance diagonal, biases."""
     r, t = log.record, log.t
     truth = r.true_pos is not None and r.true_q is not None
-    note = "" if log.has_innovations else \
+    nis = log.has_innovations
+    note = "" if nis else \
         "\n(the log records no innovations: Vicon minus the estimate of the tick before, " \
         "moved to the pose time, instead)"
-    fig, axes = _figure(6 + int(truth), f"{log.title}: estimator{note}")
+    fig, axes = _figure(6 + int(truth) + int(nis), f"{log.title}: estimator{note}")
     res_pos, res_att = vicon_residuals(log.rows)
     P = log.col("est_covariance_diag")
     sd = np.sqrt(np.clip(P, 0.0, None))
     rows = iter(axes)
+    if nis:
+        _nis_panel(next(rows), log)
     ax = next(rows)
     for k, name in enumerate(AXES):
         ax.plot(t, 100 * res_pos[:, k], ".", ms=1.5, color=f"C{k}", label=name)
@@ -676,6 +684,32 @@ def estimator_figure(log: FlightLog) -> Any:
     return _finish(fig, axes, log)
 
 
+def _nis_panel(ax: Any, log: FlightLog) -> None:
+    """The NIS of every pose the estimator judged, against its chi-square (6 dof) gate and
+    median: a consistent filter's NIS has the chi-square's median (5.35)."""
+    from scipy.stats import chi2
+
+    t, values = log.t, log.col("vicon_nis")
+    finite = np.isfinite(values)
+    gate = float(chi2.ppf(log.limits.gate_probability, 6))
+    median = float(chi2.median(6))
+    flown = float(np.median(values[finite])) if finite.any() else math.nan
+    ax.plot(t[finite], values[finite], ".", ms=1.5, color="C0",
+            label=f"NIS of each pose judged (median {flown:.2f})")
+    ax.axhline(median, color="C2", ls="--", lw=0.8,
+               label=f"chi-square (6 dof) median {median:.2f}")
+    ax.axhline(gate, color="C3", ls="--", lw=0.8,
+               label=f"gate ({log.limits.gate_probability:g}): {gate:.1f}")
+    ax.set_ylabel("NIS [-]")
+    log_y(ax)
+    floor = 1e-2  # chi-square (6 dof) falls below it with probability 2e-8: outliers only
+    low = int(np.count_nonzero(values[finite] < floor))
+    top = float(np.nanmax(values, initial=gate))
+    ax.set_ylim(floor, max(2.0 * top, 2.0 * gate))
+    if low:
+        ax.plot([], [], " ", label=f"{low} below the axis (a reset)")
+
+
 def health_figure(log: FlightLog) -> Any:
     """Vicon rate [Hz] and pose age [ms], ticks without a pose, DATA period and missed
     samples, COMMAND gaps [ms], the vehicle's STATUS flags and ctrl masks."""
@@ -700,6 +734,10 @@ def health_figure(log: FlightLog) -> Any:
     ax.plot(t[missing], np.full(missing.size, 1e3 * lim.vicon_latency_s / 2), "|",
             color="C3", ms=8,
             label=f"tick without a Vicon pose ({missing.size})")
+    refused = np.asarray(rows["vicon_refused"], dtype=np.int64)
+    hit = np.flatnonzero(refused > 0)
+    ax.plot(t[hit], np.full(hit.size, 1e3 * lim.vicon_latency_s / 4), "|", color="k", ms=8,
+            label=f"poses the estimator refused ({int(refused.sum())})")
     ax.set_ylabel("pose age [ms]")
     log_y(ax, plain=True)
     ax = axes[2]

@@ -175,12 +175,16 @@ def figures_section(figures: Sequence[Path], innovations: bool) -> list[str]:
              "supervisor's transitions (red: not a step of a nominal flight), named along "
              "the top of each figure.", ""]
     lines += [f"- [{p.name}]({p.name}): {described.get(p.stem, '')}" for p in figures]
-    if not innovations:
-        lines += ["", "The flight log records no estimator innovations: estimator.png shows "
-                  "the Vicon pose minus the estimate of the tick before it (moved to the "
-                  "pose time), an innovation proxy, with the covariance diagonal's sigmas. "
-                  "Nor does it record the Vicon poses the filter's gate rejected: health.png "
-                  "counts the ticks that had no pose at all."]
+    if innovations:
+        lines += ["", "estimator.png starts with the NIS of every pose the estimator judged "
+                  "against its chi-square gate; a consistent filter's NIS has the "
+                  "chi-square (6 dof) median, 5.35. health.png marks the poses it refused."]
+    else:
+        lines += ["", "The flight log records no estimator innovations (a log older than "
+                  "schema 5): estimator.png shows the Vicon pose minus the estimate of the "
+                  "tick before it (moved to the pose time), an innovation proxy, with the "
+                  "covariance diagonal's sigmas, and health.png counts the ticks that had "
+                  "no pose at all."]
     t = BENCHMARK_TARGETS
     targets = ", ".join(f"{name} {value:g} ms" for name, value in (
         ("compute", t.compute_p99_ms), ("jitter", t.jitter_p99_ms),

@@ -66,6 +66,8 @@ class TickResult:
         it did not step or asked for none)
     automatic : the controller was told the COMMAND it stepped for went out with every
         channel under its own control, no handover blend (see ``Controller.sent``)
+    vicon_nis : the estimator's normalised innovation squared of the last pose it judged
+        this tick (NaN: it judged none); vicon_refused : poses it refused this tick
     """
 
     command: CommandMsg
@@ -76,6 +78,8 @@ class TickResult:
     sticks: Sticks | None
     preview: Reference | None = None
     automatic: bool = False
+    vicon_nis: float = math.nan
+    vicon_refused: int = 0
 
 
 def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
@@ -157,6 +161,7 @@ class FlightCore:
         self._last_pose: Pose | None = None
         self._held: ImuSample | None = None
         self._estimate: StateEstimate | None = None
+        self._judged = self._refused = 0  # the estimator's pose counts at the last tick
         self._land_request = ""
 
     # ------------------------------------------------------------------ public
@@ -229,7 +234,7 @@ class FlightCore:
             if state is not State.DISARM:
                 self._report_sent(self._command, t)
         return TickResult(self._command, due, state, reference, self._estimate, self._sticks,
-                          self._preview, self._automatic)
+                          self._preview, self._automatic, *self._verdicts())
 
     def abort(self, t: float, state: State, reason: str) -> TickResult:
         """End the flight at ``t`` from outside the tick (the serial link failed: state
@@ -280,6 +285,15 @@ class FlightCore:
         if self._held is None:
             return self.ekf.estimate()
         return self.ekf.estimate_ahead(self._held)
+
+    def _verdicts(self) -> tuple[float, int]:
+        """(NIS of the last pose judged this tick or NaN, poses refused this tick) from the
+        estimator's running counts (a pose newer than the filter is judged a tick later,
+        inside the prediction, so the counts, not the update calls, tell)."""
+        judged, refused, nis = self.ekf.verdicts
+        new_judged, new_refused = judged - self._judged, refused - self._refused
+        self._judged, self._refused = judged, refused
+        return (nis if new_judged > 0 else math.nan), new_refused
 
     def _observe(self, t: float, vehicle: VehicleStatus, health: InputHealth,
                  stop_requests: int) -> Observation:

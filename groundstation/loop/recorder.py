@@ -37,6 +37,11 @@ Fields (frames: NED earth, FRD body; quaternions scalar-first, R(q) = eCb)::
     vicon_t              s        monotonic measurement time of that pose (NaN if none)
     vicon_position (3,)  m        pose position, NED (NaN if none)
     vicon_quaternion (4,) -       pose attitude, scalar-first (NaN if none)
+    vicon_nis            -        the estimator's normalised innovation squared
+                                  y^T S^-1 y (6 dof) of the last pose it judged this
+                                  tick (NaN if none, or none computed)
+    vicon_refused        count    poses the estimator refused this tick (gated,
+                                  repeated, lost tracking, too old, invalid, ...)
     est_position (3,)    m        estimate, NED (NaN before the estimator runs)
     est_quaternion (4,)  -        estimated attitude, scalar-first
     est_velocity_body (3,) m/s    velocity relative to earth, FRD axes
@@ -102,7 +107,7 @@ from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Stick
 
 log = structlog.get_logger(__name__)
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 """Bumped whenever :data:`RECORD_DTYPE` changes; stored in meta.json."""
 
 _XYZ = ("x", "y", "z")
@@ -125,6 +130,8 @@ _SCHEMA: tuple[tuple[str, str, tuple[str, ...] | None, str | tuple[str, ...]], .
     ("vicon_t", "<f8", None, "s"),
     ("vicon_position", "<f8", _XYZ, "m"),
     ("vicon_quaternion", "<f8", _Q, "1"),
+    ("vicon_nis", "<f8", None, "1"),
+    ("vicon_refused", "|u1", None, "count"),
     ("est_position", "<f8", _XYZ, "m"),
     ("est_quaternion", "<f8", _Q, "1"),
     ("est_velocity_body", "<f8", _XYZ, "m/s"),
@@ -366,6 +373,7 @@ class FlightRecorder:
         compute_time: float, jitter: float, latency: float, preview: Reference | None = None,
         automatic: bool = False, battery_v: float = np.nan, vehicle_flags: int = 0,
         vehicle_mask: int = 0, pilot_enabled: bool = True, pilot: Sticks | None = None,
+        vicon_nis: float = np.nan, vicon_refused: int = 0,
     ) -> None:
         """Record one tick (hot path: no validation, no allocation).
 
@@ -380,6 +388,8 @@ class FlightRecorder:
         state : supervisor state as an int; compute_time, jitter, latency [s]
         battery_v [V], vehicle_flags, vehicle_mask, pilot_enabled, pilot : what the
             vehicle last reported (STATUS and RC blocks; pilot None: no RC block)
+        vicon_nis : the estimator's normalised innovation squared of the last pose it
+            judged this tick (NaN: none); vicon_refused : poses it refused this tick
         Values that do not fit (wrong shape, out of the column's range) skip the row
         and count in :attr:`bad_rows`; appending after close is ignored.
         """
@@ -394,6 +404,8 @@ class FlightRecorder:
             c["gyro"][i] = imu.gyro
             c["acc"][i] = imu.acc
             self._put_pose(i, pose)
+            c["vicon_nis"][i] = vicon_nis
+            c["vicon_refused"][i] = vicon_refused
             self._put_estimate(i, estimate)
             self._put_reference(i, "ref", reference)
             self._put_reference(i, "preview", preview)

@@ -57,4 +57,5 @@ class TickLogger:
             vehicle_mask=status.ctrl_mask if status is not None else 0,
             pilot_enabled=rc.serial_enabled if rc is not None else True,
             pilot=rc.sticks() if rc is not None else None,
+            vicon_nis=result.vicon_nis, vicon_refused=result.vicon_refused,
         )
