@@ -250,3 +250,22 @@ def test_a_flight_with_a_configured_trajectory_refuses_motions() -> None:
     assert reply["kind"] == "state" and "--trajectory none" in reply["error"]
     status = MotionApi(core, cfg).handle({"request": "status"})
     assert status["ok"] and status["commanded"] is False and status["state"] == "TRACK"
+
+
+def test_follow_start_at_is_a_unix_time_converted_to_trajectory_time() -> None:
+    """``start_at`` 5 s from now (the client's clock) begins the trajectory 5 s of
+    trajectory time after the loop's present, whatever the planning lead."""
+    from groundstation.loop.assemble import trajectory_for_flight
+
+    core = FlightCore(CFG)
+    core.supervisor.force(0.0, State.TRACK, "test")
+    api = MotionApi(core, CFG, clock=lambda: 100.0, wall_clock=lambda: 1.7e9)
+    section = {"name": "figure-eight", "period_s": 10.0, "center": [0.0, 0.0, -1.0]}
+    reply = api.handle({"request": "follow", "trajectory": section, "start_at": 1.7e9 + 5.0})
+    assert reply["ok"], reply
+    _, duration = trajectory_for_flight(CFG.model_copy(update={
+        "trajectory": CFG.trajectory.model_copy(update=section)}))
+    begin = core.mission.trajectory_time + 5.0
+    assert reply["motion"]["duration_s"] == pytest.approx(begin + duration - 0.05)
+    late = api.handle({"request": "follow", "trajectory": section, "start_at": 1.7e9 + 0.2})
+    assert late["ok"] is False and late["kind"] == "infeasible" and "start_at" in late["error"]

@@ -232,8 +232,7 @@ class MotionApi:
         def plan(base: PlanBase) -> Planned:
             start = None
             if start_at is not None:  # unix time -> trajectory time (both advance in TRACK)
-                start = base.start - PLAN_LEAD_S + (start_at - received_wall) \
-                    - (self._clock() - received)
+                start = base.now + (start_at - received_wall) - (self._clock() - received)
             return plan_follow(base, trajectory, duration_s, self._limits, start)
         return self._motion(plan)
 

@@ -238,8 +238,8 @@ class Motion:
 class PlanBase:
     """What a motion is planned from, taken in the loop: the plan in force and its
     ``version``, the trajectory time ``start`` [s] the new motion begins (the loop's time
-    plus the lead), the mission's heading ``offset`` [rad], the supervisor's state name
-    and the hover point ``home`` (NED [m])."""
+    ``now`` plus the lead), the mission's heading ``offset`` [rad], the supervisor's state
+    name and the take-off point ``ground`` (NED [m])."""
 
     plan: Plan
     version: int
@@ -247,6 +247,7 @@ class PlanBase:
     offset: float
     state: str
     ground: FloatArray
+    now: float = 0.0
 
     def reference(self) -> Reference:
         """The reference at the start: where the new motion begins."""
@@ -455,7 +456,7 @@ class Commander:
     def base(self, tau: float, offset: float, state: str, ground: FloatArray,
              lead: float = PLAN_LEAD_S) -> PlanBase:
         """What a motion requested now is planned from (the loop's trajectory time ``tau``)."""
-        return PlanBase(self._plan, self.version, tau + lead, offset, state, ground.copy())
+        return PlanBase(self._plan, self.version, tau + lead, offset, state, ground.copy(), tau)
 
     def install(self, planned: Planned, tau: float) -> Motion:
         """Fly ``planned`` from its start; returns its motion with its id. Raises
