@@ -205,10 +205,9 @@ def test_motions_start_arrive_are_preempted_and_idle_flights_land() -> None:
     assert commander.current.state == "moving"
     commander.update(103.1, 3.1, True, np.array([0.52, 0.0, -1.0]))
     assert commander.current.state == "arrived" and commander.current.arrived == 103.1
-    commander.update(104.0, 4.0, True, np.array([0.5, 0.0, -1.0]))
-    assert not commander.land_request
-    commander.update(105.2, 5.2, True, np.array([0.5, 0.0, -1.0]))
-    assert commander.land_request == "idle for 2 s without a motion command"
+    assert not commander.update(104.0, 4.0, True, np.array([0.5, 0.0, -1.0]))
+    assert commander.update(105.2, 5.2, True, np.array([0.5, 0.0, -1.0])) == \
+        "idle for 2 s without a motion command"
     # a failsafe ends the motion in progress and the plan rests where the reference was
     other = Commander(HOME, 0.0, arrival_tolerance_m=0.05, idle_land_s=60.0)
     other.install(plan_go_to(_base(other, 0.0), np.array([0.5, 0.0, -1.0]), None, 2.0,

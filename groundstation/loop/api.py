@@ -48,6 +48,7 @@ from functools import partial
 from typing import Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
+import structlog
 from pydantic import ValidationError
 
 from groundstation.asctec.messages import CHANNELS
@@ -72,6 +73,8 @@ from groundstation.loop.commander import (
 from groundstation.loop.core import FlightCore
 from groundstation.loop.supervisor import State
 from groundstation.model.quaternion import rotate
+
+log = structlog.get_logger(__name__)
 
 T = TypeVar("T")
 
@@ -196,6 +199,7 @@ class MotionApi:
         try:
             return handler(self, request)
         except CommandRefusedError as exc:
+            log.info("request refused", request=kind, kind=exc.kind, reason=exc.reason)
             return _refusal(exc)
 
     # ------------------------------------------------------------------ requests
@@ -252,6 +256,7 @@ class MotionApi:
                 raise CommandRefusedError("state", "not flying yet (PREFLIGHT): stop the "
                                           "daemon instead (Ctrl-C, systemctl stop)")
             self.core.request_land("land requested by a client")
+            log.info("land requested by a client", state=state.name)
             return {"ok": True, "state": state.name}
         return self._in_loop(land)
 
@@ -268,6 +273,7 @@ class MotionApi:
                         "request", f"'auto' must list one or more of {list(CHANNELS)} once "
                         f"each, got {str(auto)[:80]}")
                 core.set_auto_channels(auto)
+                log.info("channels", auto=auto, state=core.state.name)
             auto_now = core.auto_channels
             return {"ok": True, "auto": [c for c in CHANNELS if c in auto_now],
                     "state": core.state.name}
@@ -295,6 +301,9 @@ class MotionApi:
                     raise
                 lead *= 2.0
                 continue
+            log.info("motion accepted", id=motion.id, kind=motion.kind,
+                     target=[round(float(v), 3) for v in motion.target],
+                     duration_s=round(motion.end - motion.start, 2))
             return {"ok": True, "motion": motion.report(), "state": State.TRACK.name}
         raise CommandRefusedError("busy", "the flight changed its plan while this motion was "
                                   "planned, three times: try again")

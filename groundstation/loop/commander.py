@@ -435,9 +435,6 @@ class Commander:
         self.motions: list[Motion] = []
         """Every motion accepted, oldest first."""
         self._idle_since: float | None = None
-        self.land_request = ""
-        """Why the flight should land now ("" while it should not): a client asked, or
-        it was idle for ``idle_land_s``."""
 
     @property
     def plan(self) -> Plan:
@@ -494,15 +491,11 @@ class Commander:
         if motion is not None and motion.state == "moving":
             motion.state, motion.reason = "preempted", reason
 
-    def request_land(self, reason: str) -> None:
-        """Land as soon as the supervisor can (nominally, with ``reason``)."""
-        if not self.land_request:
-            self.land_request = reason
-
-    def update(self, t: float, tau: float, tracking: bool, position: FloatArray) -> None:
-        """Each tick: note motions starting and arriving, and land when idle too long.
-        ``t`` monotonic [s], ``tau`` trajectory time [s], ``tracking`` the supervisor is in
-        TRACK, ``position`` the estimate NED [m]."""
+    def update(self, t: float, tau: float, tracking: bool, position: FloatArray) -> str:
+        """Each tick: note motions starting and arriving; returns why to land ("" for no):
+        at rest without a motion command for ``idle_land_s``. ``t`` monotonic [s], ``tau``
+        trajectory time [s], ``tracking`` the supervisor is in TRACK, ``position`` the
+        estimate NED [m]."""
         motion = self.current
         if motion is not None and motion.state == "moving":
             if motion.started is None and tau >= motion.start:
@@ -514,11 +507,11 @@ class Commander:
         at_rest = motion is None or motion.state != "moving" or tau >= motion.end
         if not (tracking and at_rest):
             self._idle_since = None
-            return
-        if self._idle_since is None:
+        elif self._idle_since is None:
             self._idle_since = t
         elif t - self._idle_since >= self._idle_land_s:
-            self.request_land(f"idle for {self._idle_land_s:g} s without a motion command")
+            return f"idle for {self._idle_land_s:g} s without a motion command"
+        return ""
 
     def idle_land_in(self, t: float) -> float | None:
         """Seconds until an idle landing [s], None while a motion is under way."""

@@ -182,11 +182,9 @@ class FlightCore:
 
     @property
     def land_request_reason(self) -> str:
-        """Why the flight is to land at once ("" when it is not): a request, or the
-        commanded flight idle too long."""
-        if self._land_request:
-            return self._land_request
-        return self.commander.land_request if self.commander is not None else ""
+        """Why the flight is to land at once ("" when it is not): a client asked, or the
+        commanded flight was idle too long."""
+        return self._land_request
 
     def request_land(self, reason: str) -> None:
         """Land as soon as the supervisor can (from TAKEOFF or TRACK; a nominal end)."""
@@ -213,8 +211,10 @@ class FlightCore:
             if old is State.TRACK and state is not State.TRACK:
                 self.commander.preempt(self.mission.trajectory_time,
                                        f"{state.name}: {self.supervisor.transitions[-1].reason}")
-            self.commander.update(t, self.mission.trajectory_time, state is State.TRACK,
-                                  position)
+            idle = self.commander.update(t, self.mission.trajectory_time,
+                                         state is State.TRACK, position)
+            if idle:
+                self.request_land(idle)
         commanding = self.supervisor.commanding
         due = t >= self._next_command or commanding != self._was_commanding
         if due:
@@ -325,7 +325,7 @@ class FlightCore:
             pilot_enabled=vehicle.pilot_enabled, vehicle_applying=vehicle.applying,
             stop_requests=stop_requests, lift_fraction=self._lift_fraction,
             specific_force_g=force_g, battery_v=vehicle.battery_v,
-            land_request=self.land_request_reason,
+            land_request=self._land_request,
         )
 
     def _vicon_age(self, health: InputHealth) -> float:

@@ -262,7 +262,7 @@ class FlightDaemon:
                      log=self.log_dir, controller=cfg.controller.type)
             self._front_health = partial(self._health_section, link, vicon)
             try:
-                self._loop(_Io(link, vicon, recorder, telemetry, control, notifier, pacer))
+                self._loop(_Io(link, vicon, recorder, telemetry, notifier, pacer))
             finally:
                 self._inbox.close()  # requests now run where they arrive, or are refused
             self._publish_end(telemetry, link, vicon)
@@ -478,7 +478,6 @@ class _Io:
     vicon: ViconClient
     recorder: FlightRecorder
     telemetry: TelemetryPublisher
-    control: ControlServer
     notifier: SdNotifier
     pacer: CollectorPacer
 
