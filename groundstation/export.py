@@ -45,6 +45,12 @@ import numpy.typing as npt
 from groundstation import __version__
 from groundstation.errors import GroundStationError, RecorderError
 from groundstation.loop.recorder import COLUMN_UNITS, FLAT_DTYPE, RECORD_DTYPE, read_flight
+from groundstation.telemetry.foxglove import (
+    foxglove_quaternion,
+    pose_in_frame,
+    timestamp_ns,
+    yaw_quaternion,
+)
 
 CHANNELS: dict[str, tuple[str, ...]] = {
     "/imu": ("imu_t", "imu_counter", "gyro_counts", "acc_counts", "gyro", "acc"),
@@ -122,10 +128,6 @@ def _value(v: Any) -> Any:
     return v
 
 
-def _quaternion_xyzw(q: Any) -> dict[str, float]:
-    return {"x": float(q[1]), "y": float(q[2]), "z": float(q[3]), "w": float(q[0])}
-
-
 def export_mcap(log: str | Path, out: str | Path) -> int:
     """Write the flight log ``log`` as the MCAP file ``out``; return the messages written.
 
@@ -161,8 +163,7 @@ def export_mcap(log: str | Path, out: str | Path) -> int:
             for row in rows:
                 t = float(row["t"])
                 log_ns = start_ns + round((t - mono0) * 1e9)
-                stamp = {"sec": log_ns // 1_000_000_000, "nsec": log_ns % 1_000_000_000}
-                q: tuple[float, ...]
+                stamp = timestamp_ns(log_ns)
                 for topic, columns in CHANNELS.items():
                     msg: dict[str, Any] = {"t": t}
                     msg.update({name: _value(row[name]) for name in columns})
@@ -176,18 +177,15 @@ def export_mcap(log: str | Path, out: str | Path) -> int:
                     p = row[pos]
                     if not np.all(np.isfinite(p)):
                         continue
-                    if att.endswith("_yaw"):
-                        yaw = float(row[att])
-                        if not math.isfinite(yaw):
-                            continue
-                        q = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
-                    else:
-                        q = tuple(float(v) for v in row[att])
-                        if not all(math.isfinite(v) for v in q):
-                            continue
-                    pose = {"timestamp": stamp, "frame_id": "ned", "pose": {
-                        "position": {"x": float(p[0]), "y": float(p[1]), "z": float(p[2])},
-                        "orientation": _quaternion_xyzw(q)}}
+                    try:
+                        orientation = yaw_quaternion(float(row[att])) if att.endswith("_yaw") \
+                            else foxglove_quaternion(row[att])
+                    except ValueError:  # a quaternion that is no rotation (NaN, zero)
+                        continue
+                    if not all(math.isfinite(v) for v in orientation.values()):
+                        continue  # a NaN heading
+                    pose = pose_in_frame(stamp, {"x": float(p[0]), "y": float(p[1]),
+                                                 "z": float(p[2])}, orientation)
                     writer.add_message(channel_ids[topic], log_time=log_ns, publish_time=log_ns,
                                        data=json.dumps(pose).encode())
                     count += 1

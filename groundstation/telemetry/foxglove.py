@@ -123,7 +123,11 @@ def yaw_quaternion(yaw: float) -> dict[str, float]:
 
 def timestamp(time_unix: float) -> dict[str, int]:
     """Foxglove ``{sec, nsec}`` of a wall-clock time [s since the epoch]."""
-    ns = log_time_ns(time_unix)
+    return timestamp_ns(log_time_ns(time_unix))
+
+
+def timestamp_ns(ns: int) -> dict[str, int]:
+    """Foxglove ``{sec, nsec}`` of a wall-clock time [ns since the epoch]."""
     return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
 
@@ -250,7 +254,7 @@ class LiveView:
             position = _vector3(estimate.get("position"))
             orientation = _quaternion(estimate.get("quaternion"))
             if position is not None and orientation is not None:
-                out.append((POSE_ESTIMATE, _pose_in_frame(stamp, position, orientation)))
+                out.append((POSE_ESTIMATE, pose_in_frame(stamp, position, orientation)))
                 transforms.append({
                     "timestamp": stamp, "parent_frame_id": NED_FRAME,
                     "child_frame_id": BODY_FRAME, "translation": position,
@@ -264,7 +268,7 @@ class LiveView:
             position = _vector3(reference.get("position"))
             yaw = reference.get("yaw")
             if position is not None and isinstance(yaw, int | float) and math.isfinite(yaw):
-                out.append((POSE_REFERENCE, _pose_in_frame(stamp, position, yaw_quaternion(yaw))))
+                out.append((POSE_REFERENCE, pose_in_frame(stamp, position, yaw_quaternion(yaw))))
                 if isinstance(t, int | float):
                     self.paths[PATH_REFERENCE].append(float(t), position)
 
@@ -290,7 +294,7 @@ class LiveView:
                        "points": points, "color": dict(color)}]}]}
 
 
-def _pose_in_frame(stamp: dict[str, int], position: dict[str, float],
+def pose_in_frame(stamp: dict[str, int], position: dict[str, float],
                    orientation: dict[str, float]) -> dict[str, Any]:
     """A ``foxglove.PoseInFrame`` in :data:`NED_FRAME`."""
     return {"timestamp": stamp, "frame_id": NED_FRAME,
