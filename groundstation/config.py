@@ -542,7 +542,9 @@ class TrajectoryConfig(ConfigModel):
     step_m: PositiveFloat = 0.5  # step amplitude for step-x/y/z, tuned to stay in the volume
     low_height_m: PositiveFloat = 0.02  # low-hover height, Ch. 11.4 (2 cm)
     corner_smoothing_s: NonNegFloat = 0.0  # 0 = sharp corners as in the thesis
-    file: Path | None = None  # CSV of waypoints (t, x, y, z[, yaw]) for name 'waypoints'
+    file: Path | None = None
+    # for name 'waypoints': a waypoint CSV (t, x, y, z[, yaw]) or a uav_trajectories /
+    # Crazyswarm polynomial file (Duration,x^0,...), told apart by the header (README)
     yaw_deg: float | None = None
     # heading to fly at [deg from north]; null keeps the heading the vehicle was placed at
     # (a waypoint CSV's yaw column, when present, gives the heading instead)
@@ -551,6 +553,9 @@ class TrajectoryConfig(ConfigModel):
     # min-jerk: make the reference flyable before flight (start and stop at rest, corners
     # and velocity steps blended within the safety limits, path through the corners);
     # none: the thesis's raw reference (sharp corners), for the Ch. 11 comparison
+    polynomial_positions: Literal["relative", "absolute"] = "relative"
+    # a polynomial file's positions: relative to its start, which is placed at center (as
+    # the Crazyflie's start_trajectory(relative=True)), or absolute lab coordinates
 
     @model_validator(mode="after")
     def _file(self) -> TrajectoryConfig:

@@ -46,7 +46,8 @@ def test_figure_eight_tilt_matches_the_closed_form() -> None:
 def test_too_fast_figure_eight_is_refused_with_advice() -> None:
     fast = FigureEight([0, 0, -1], width_m=1.5, period_s=2.0)
     with pytest.raises(TrajectoryError, match=r"at t = \d+\.\d\d s, \(-?\d\.\d\d, -?\d\.\d\d, "
-                       r"-1\.00\) m: needs \d+\.\d deg tilt, the tilt limit = 20\.0 deg: slow it"):
+                       r"-1\.00\) m: needs \d+\.\d deg tilt, the tilt limit = 20\.0 deg "
+                       r"\(closed form\): slow it down by k = 2\.10"):
         check_feasibility(fast, FlightLimits(max_tilt_rad=math.radians(20), max_speed_m_s=10))
 
 

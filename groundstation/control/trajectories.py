@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from groundstation.control.polyfile import is_polynomial_file, load_polynomial_file
 from groundstation.control.trajectory import (
     FigureEight,
     Hover,
@@ -92,29 +93,43 @@ def yz_rectangle(
 
 def load_waypoints(path: str | Path, *, smoothing_s: float = 0.0,
                    yaw: float | None = None) -> PiecewiseLinear:
-    """Read a CSV of ``t, x, y, z[, yaw]`` rows (s, NED m, rad) into an open path.
+    """Read a CSV of ``t, x, y, z[, yaw]`` rows (s, NED m, heading) into an open path.
 
     A first content line that is not numeric is a header; blank lines and lines
     starting with ``#`` are skipped. Times are taken relative to the first
     row and must increase strictly; the path holds the last point at the end.
     A yaw column gives absolute headings (unwrapped: a step across +-pi is the
-    short way); without one the heading is ``yaw`` [rad] (None: free heading).
-    Raises TrajectoryError naming the line of any problem.
+    short way) in radians, or in degrees when the header names the column ``yaw_deg``
+    (any name with "deg"; ``yaw``, ``yaw_rad`` or no header: radians); without one the
+    heading is ``yaw`` [rad] (None: free heading). Raises TrajectoryError naming the
+    line of any problem. Whether the rows are corners or samples of a curve is decided
+    when the path is shaped (:func:`~groundstation.control.shaping.shape_for_flight`).
     """
     return waypoints_from_rows(read_waypoint_rows(path), smoothing_s=smoothing_s, yaw=yaw,
                                source=str(path))
 
 
+def yaw_unit(header: Sequence[str]) -> float:
+    """Radians per unit of a waypoint header's heading column (the fifth): ``pi / 180``
+    when its name mentions degrees (``yaw_deg``, ``yaw [deg]``), else 1 (radians)."""
+    if len(header) < 5:
+        return 1.0
+    return math.pi / 180.0 if "deg" in header[4].strip().lower() else 1.0
+
+
 def read_waypoint_rows(path: str | Path) -> list[list[float]]:
-    """The ``t, x, y, z[, yaw]`` rows of a waypoint CSV (see :func:`load_waypoints`);
-    TrajectoryError naming the line of a problem."""
+    """The ``t, x, y, z[, yaw]`` rows of a waypoint CSV, headings in radians (see
+    :func:`load_waypoints`); TrajectoryError naming the line of a problem."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise TrajectoryError(f"{path}: cannot read waypoints: {exc.strerror}") from exc
+    except UnicodeDecodeError:
+        raise TrajectoryError(f"{path}: cannot read waypoints: not UTF-8 text") from None
     rows: list[list[float]] = []
     first = True
+    unit = 1.0
     for lineno, row in enumerate(csv.reader(text.splitlines()), start=1):
         if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
             continue
@@ -123,8 +138,11 @@ def read_waypoint_rows(path: str | Path) -> list[list[float]]:
             values = [float(cell) for cell in row]
         except ValueError:
             if header:
+                unit = yaw_unit(row)
                 continue
             raise TrajectoryError(f"{path}:{lineno}: not a number in {row!r}") from None
+        if len(values) == 5:
+            values[4] *= unit
         if len(values) not in (4, 5) or not all(math.isfinite(v) for v in values):
             raise TrajectoryError(
                 f"{path}:{lineno}: expected 4 or 5 finite values (t, x, y, z[, yaw]), "
@@ -174,6 +192,7 @@ def make_trajectory(
     file: str | Path | None = None,
     yaw: float | None = None,
     yaw_turn: float = 2.0 * math.pi,
+    relative: bool = True,
 ) -> Trajectory:
     """Build a named trajectory (the names of ``TrajectoryConfig.name``).
 
@@ -184,9 +203,11 @@ def make_trajectory(
     low-hover: ``center`` in x, y at ``low_height_m`` above the floor (Ch. 11.4).
     figure-eight: lemniscate ``size_m`` wide, one lap per ``period_s``.
     yaw-turn: hold ``center`` while the heading turns by ``yaw_turn`` [rad] over
-    ``period_s``. waypoints: the CSV ``file`` (see :func:`load_waypoints`).
-    ``yaw`` [rad]: the heading (the start heading of yaw-turn); None keeps the
-    heading at take-off (free heading).
+    ``period_s``. waypoints: the CSV ``file``, a waypoint list (see
+    :func:`load_waypoints`) or a polynomial file recognised by its header
+    (:mod:`~groundstation.control.polyfile`; ``relative``: its start placed at
+    ``center``). ``yaw`` [rad]: the heading (the start heading of yaw-turn); None keeps
+    the heading at take-off (free heading).
     """
     c = np.asarray(center, dtype=float)
     steps = {"step-x": (step_m, 0.0, 0.0), "step-y": (0.0, step_m, 0.0),
@@ -210,8 +231,20 @@ def make_trajectory(
     if name == "waypoints":
         if file is None:
             raise TrajectoryError("trajectory 'waypoints' needs a file")
-        return load_waypoints(file, smoothing_s=corner_smoothing_s, yaw=yaw)
+        return load_trajectory_file(file, center=c, relative=relative, yaw=yaw,
+                                    smoothing_s=corner_smoothing_s)
     raise TrajectoryError(f"unknown trajectory {name!r}; known: {', '.join(TRAJECTORY_NAMES)}")
+
+
+def load_trajectory_file(path: str | Path, *, center: FloatArray | list[float],
+                         relative: bool = True, yaw: float | None = None,
+                         smoothing_s: float = 0.0) -> Trajectory:
+    """A trajectory file as its header says: a uav_trajectories / Crazyswarm polynomial
+    file (``Duration,x^0,...``; its start at ``center`` if ``relative``) or a waypoint
+    CSV (``t,x,y,z[,yaw]``)."""
+    if is_polynomial_file(path):
+        return load_polynomial_file(path, origin=center if relative else None, yaw=yaw)
+    return load_waypoints(path, smoothing_s=smoothing_s, yaw=yaw)
 
 
 def trajectory_from_config(config: TrajectoryConfig, **overrides: Any) -> Trajectory:
@@ -223,6 +256,7 @@ def trajectory_from_config(config: TrajectoryConfig, **overrides: Any) -> Trajec
         "corner_smoothing_s": config.corner_smoothing_s, "file": config.file,
         "yaw": None if config.yaw_deg is None else math.radians(config.yaw_deg),
         "yaw_turn": math.radians(config.yaw_turn_deg),
+        "relative": config.polynomial_positions == "relative",
     }
     params.update(overrides)
     return make_trajectory(config.name, **params)

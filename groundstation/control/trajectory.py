@@ -35,6 +35,14 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from groundstation.control.curve import (
+    HoldSet,
+    IntArray,
+    PieceBounds,
+    PieceSet,
+    PolySet,
+    Samples,
+)
 from groundstation.control.minjerk import smoothstep
 from groundstation.errors import TrajectoryError
 from groundstation.types import FloatArray, Reference
@@ -113,6 +121,14 @@ class Hover:
         p = self._p0 if t < self._t_step else self._p1
         return Reference(t=t, position=p.copy(), velocity=np.zeros(3),
                          acceleration=np.zeros(3), yaw=self._yaw)
+
+    def pieces(self, t0: float, t1: float) -> list[PieceSet]:
+        """At rest; with a step, two pieces (the step is the jump between them)."""
+        if self.duration == 0.0 or not t0 < self._t_step < t1:
+            p = self._p0 if t1 <= self._t_step else self._p1
+            return [HoldSet(t0, t1, p, self._yaw)]
+        return [HoldSet(t0, self._t_step, self._p0, self._yaw),
+                HoldSet(self._t_step, t1, self._p1, self._yaw)]
 
 
 class PiecewiseLinear:
@@ -240,6 +256,31 @@ class PiecewiseLinear:
         return Reference(t=t, position=pos, velocity=vel, acceleration=acc, yaw=yaw,
                          yaw_rate=yaw_rate)
 
+    def pieces(self, t0: float, t1: float) -> list[PieceSet] | None:
+        """The straight segments as degree-1 polynomials (laps unrolled if periodic, at
+        rest outside an open path); None with corner smoothing (not described piecewise)."""
+        if self.smoothing_s > 0.0:
+            return None
+        coef = np.zeros((len(self._t) - 1, 2, 4))
+        coef[:, 0, :3], coef[:, 1, :3] = self._p[:-1], self._v
+        coef[:, 0, 3], coef[:, 1, 3] = self._yaws[:-1], self._yaw_rates
+        if not self.periodic:
+            out: list[PieceSet] = []
+            if t0 < 0.0:
+                out.append(HoldSet(t0, 0.0, self._p[0], float(self._yaws[0])))
+            out.append(PolySet(self._t[:-1], self._t[1:], coef))
+            if t1 > self.duration:
+                out.append(HoldSet(self.duration, t1, self._p[-1], float(self._yaws[-1])))
+            return out
+        period, turn = self.duration, float(self._yaws[-1] - self._yaws[0])
+        sets: list[PieceSet] = []
+        for lap in range(math.floor(t0 / period), math.ceil(t1 / period)):
+            lap_coef = coef.copy()
+            lap_coef[:, 0, 3] += lap * turn
+            sets.append(PolySet(self._t[:-1] + lap * period, self._t[1:] + lap * period,
+                                lap_coef))
+        return sets
+
 
 def knot_headings(yaw: float | FloatArray | None, n: int) -> tuple[FloatArray, bool]:
     """(n,) unwrapped knot headings [rad] and free_heading from a ``yaw`` argument."""
@@ -298,10 +339,10 @@ class FigureEight:
         yaw: float | None = None,
         name: str = "figure-eight",
     ) -> None:
-        if not (width_m > 0.0 and period_s > 0.0):
-            raise TrajectoryError(
-                f"figure-eight needs width_m > 0 and period_s > 0, found {width_m!r}, {period_s!r}"
-            )
+        if not (math.isfinite(width_m) and math.isfinite(period_s) and width_m > 0.0
+                and period_s > 0.0):
+            raise TrajectoryError(f"figure-eight needs a finite width_m > 0 and period_s > 0, "
+                                  f"found {width_m!r}, {period_s!r}")
         self.name = name
         self.duration = float(period_s)
         self._c = _vec3(center, "figure-eight centre")
@@ -320,6 +361,70 @@ class FigureEight:
         jerk = np.array([-4.0 * a * w ** 3 * c2, -a * w ** 3 * c1, 0.0])
         return Reference(t=t, position=pos, velocity=vel, acceleration=acc, yaw=self._yaw,
                          jerk=jerk)
+
+    def peaks(self) -> tuple[float, float, float, float]:
+        """Closed-form peaks over a lap: speed ``sqrt(2) a w`` (at the centre),
+        acceleration ``17/8 a w^2`` (where ``sin^2(w t) = 17/32``), jerk ``sqrt(17) a w^3``
+        (at the centre) and snap ``257/32 a w^4`` (``sin^2(w t) = 257/512``), with the half
+        width ``a`` [m] and ``w = 2 pi / period`` [rad/s]: e.g. ``|a|^2 = a^2 w^4 u (17 -
+        16 u)`` with ``u = sin^2(w t)``, largest at ``u = 17/32``."""
+        a, w = self._a, self._w
+        return (math.sqrt(2.0) * a * w, 17.0 / 8.0 * a * w * w, math.sqrt(17.0) * a * w ** 3,
+                257.0 / 32.0 * a * w ** 4)
+
+    def critical_times(self, t0: float, t1: float) -> list[float]:
+        """The times in ``[t0, t1]`` (first lap in it) where the speed, acceleration, jerk
+        and each coordinate peak (see :meth:`peaks`)."""
+        star = math.asin(math.sqrt(17.0 / 32.0))
+        angles = [k * math.pi / 4.0 for k in range(8)] + [star, math.pi - star,
+                                                           math.pi + star, 2 * math.pi - star]
+        lap = math.floor(t0 / self.duration) if math.isfinite(t0 / self.duration) else 0
+        out = []
+        for base in (lap, lap + 1):
+            out += [(base + th / (2 * math.pi)) * self.duration for th in angles]
+        return sorted(t for t in out if t0 <= t <= t1)
+
+    def pieces(self, t0: float, t1: float) -> list[PieceSet]:
+        """The closed form over ``[t0, t1]`` in pieces of at most 1/16 lap."""
+        n = min(max(1, math.ceil(16.0 * (t1 - t0) / self.duration)), 4096)
+        edges = np.linspace(t0, t1, n + 1)
+        return [_EightSet(self, edges[:-1], edges[1:])]
+
+    def sample_many(self, t: FloatArray) -> Samples:
+        """:meth:`sample` at many times ``t`` (n,) [s] at once."""
+        t = np.asarray(t, dtype=float)
+        a, w, c = self._a, self._w, self._c
+        s1, c1, s2, c2 = np.sin(w * t), np.cos(w * t), np.sin(2 * w * t), np.cos(2 * w * t)
+        zero = np.zeros_like(t)
+        pos = np.stack([c[0] + 0.5 * a * s2, c[1] + a * s1, np.full_like(t, c[2])], axis=1)
+        vel = np.stack([a * w * c2, a * w * c1, zero], axis=1)
+        acc = np.stack([-2.0 * a * w * w * s2, -a * w * w * s1, zero], axis=1)
+        jerk = np.stack([-4.0 * a * w ** 3 * c2, -a * w ** 3 * c1, zero], axis=1)
+        return Samples(t.copy(), pos, vel, acc, jerk, np.full_like(t, self._yaw), zero.copy())
+
+
+class _EightSet:
+    """Pieces of a :class:`FigureEight`, bounded by its closed-form peaks."""
+
+    kind = "closed form"
+
+    def __init__(self, eight: FigureEight, start: FloatArray, end: FloatArray) -> None:
+        self.eight, self.start, self.end = eight, start, end
+
+    def evaluate(self, index: IntArray, t: FloatArray) -> Samples:
+        """The closed form at ``t``."""
+        return self.eight.sample_many(t)
+
+    def bounds(self) -> PieceBounds:
+        """The lap's peaks and box (``centre -+ (a/2, a, 0)``) for every piece."""
+        m = len(self.start)
+        speed, accel, jerk, snap = self.eight.peaks()
+        reach = np.array([0.5 * self.eight._a, self.eight._a, 0.0])
+        full = np.ones(m)
+        return PieceBounds(lo=np.tile(self.eight._c - reach, (m, 1)),
+                           hi=np.tile(self.eight._c + reach, (m, 1)), speed=speed * full,
+                           accel=accel * full, jerk=jerk * full, snap=snap * full,
+                           yaw_rate=0.0 * full, yaw_accel=0.0 * full)
 
 
 class YawTurn:
@@ -343,7 +448,7 @@ class YawTurn:
         yaw: float | None = None,
         name: str = "yaw-turn",
     ) -> None:
-        if not (math.isfinite(turn) and period_s > 0.0):
+        if not (math.isfinite(turn) and math.isfinite(period_s) and period_s > 0.0):
             raise TrajectoryError(
                 f"yaw-turn needs a finite turn and period_s > 0, found {turn!r}, {period_s!r}")
         self.name = name
@@ -357,3 +462,24 @@ class YawTurn:
         s, ds, _, _ = smoothstep(t / self.duration)
         return Reference(t=t, position=self._c.copy(), velocity=np.zeros(3),
                          yaw=self._yaw + self._turn * s, yaw_rate=self._turn * ds / self.duration)
+
+    def critical_times(self, t0: float, t1: float) -> list[float]:
+        """Mid-turn, where the heading rate peaks at ``15/8 turn / period``."""
+        mid = 0.5 * self.duration
+        return [mid] if t0 <= mid <= t1 else []
+
+    def pieces(self, t0: float, t1: float) -> list[PieceSet]:
+        """The turn as one quintic in the heading (``turn S(t / T)``), at rest around it."""
+        big_t, turn = self.duration, self._turn
+        coef = np.zeros((1, 6, 4))
+        coef[0, 0, :3] = self._c
+        coef[0, 0, 3] = self._yaw
+        coef[0, 3:, 3] = [10.0 * turn / big_t ** 3, -15.0 * turn / big_t ** 4,
+                          6.0 * turn / big_t ** 5]
+        out: list[PieceSet] = []
+        if t0 < 0.0:
+            out.append(HoldSet(t0, 0.0, self._c, self._yaw))
+        out.append(PolySet(np.zeros(1), np.array([big_t]), coef))
+        if t1 > big_t:
+            out.append(HoldSet(big_t, t1, self._c, self._yaw + turn))
+        return out

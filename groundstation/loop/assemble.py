@@ -9,21 +9,32 @@ evaluation build identical flights.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
+import structlog
 
 from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller
-from groundstation.control.feasibility import FlightLimits, LimitNames, Volume, check_feasibility
+from groundstation.control.feasibility import (
+    FeasibilityReport,
+    FlightLimits,
+    LimitNames,
+    Volume,
+    check_feasibility,
+)
 from groundstation.control.lqr import LqrController
 from groundstation.control.lqr_ff import FeedforwardLqr
 from groundstation.control.pid import PidController
-from groundstation.control.shaping import shape_for_flight
+from groundstation.control.polynomial import PiecewisePolynomial
+from groundstation.control.shaping import describe, shape_for_flight
 from groundstation.control.trajectories import trajectory_from_config
-from groundstation.control.trajectory import Trajectory
-from groundstation.errors import ConfigError
+from groundstation.control.trajectory import PiecewiseLinear, Trajectory
+from groundstation.errors import ConfigError, TrajectoryError
 from groundstation.loop.commander import DEFAULT_MOVE_ACCEL_M_S2, Commander, MotionLimits
 from groundstation.loop.inputs import quadrotor_params
+
+_log = structlog.get_logger(__name__)
 
 
 def controller_from_config(config: GroundStationConfig) -> Controller:
@@ -110,28 +121,66 @@ def commander_from_config(config: GroundStationConfig) -> Commander:
     return commander
 
 
+@dataclass(frozen=True)
+class PreparedTrajectory:
+    """A trajectory as it will be flown: ``trajectory`` for ``duration_s`` [s],
+    ``report`` its feasibility (problems listed, if any), ``description`` what it was
+    taken to be (fitted samples with their noise and residual, corners, polynomial
+    segments, a closed form; eased or not)."""
+
+    trajectory: Trajectory
+    duration_s: float
+    report: FeasibilityReport
+    description: str
+
+
+def prepare_trajectory(config: GroundStationConfig, trajectory: Trajectory | None = None,
+                       duration_s: float | None = None) -> PreparedTrajectory:
+    """:func:`trajectory_for_flight` without raising on broken limits: the shaped
+    trajectory, its duration, its feasibility report and what it was taken to be.
+    TrajectoryError only if it cannot be built (a file that cannot be read)."""
+    traj = trajectory if trajectory is not None else trajectory_from_config(config.trajectory)
+    if duration_s is None:
+        lap = traj.periodic and traj.duration > 0.0
+        if lap or isinstance(traj, PiecewiseLinear | PiecewisePolynomial):  # a file: once
+            duration_s = traj.duration
+        else:
+            duration_s = max(traj.duration, config.trajectory.period_s)
+    limits = flight_limits_from_config(config)
+    traj, duration_s = shape_for_flight(traj, duration_s, limits.max_accel_m_s2, limits=limits,
+                                        shaping=config.trajectory.shaping)
+    report = check_feasibility(traj, limits, volume=volume_from_config(config),
+                               horizon_s=duration_s, raise_on_error=False)
+    return PreparedTrajectory(traj, duration_s, report, describe(traj))
+
+
 def trajectory_for_flight(config: GroundStationConfig, trajectory: Trajectory | None = None,
                           duration_s: float | None = None) -> tuple[Trajectory, float]:
     """The trajectory to fly and how long to fly it [s], checked before flight.
 
     Builds ``config.trajectory`` unless ``trajectory`` is given; the default duration
-    is one lap of a periodic trajectory, else the longer of the trajectory and
-    ``trajectory.period_s``. With ``trajectory.shaping: min-jerk`` it is made
-    flyable (:func:`~groundstation.control.shaping.shape_for_flight`; an eased
-    start and end lengthen the flight by the ramp). Then every sampled point is
-    checked against the limits and the volume (:func:`flight_limits_from_config`,
-    :func:`volume_from_config`). Raises TrajectoryError (a waypoint file that cannot
-    be read, one line per broken limit) before anything is connected.
+    is one lap of a periodic trajectory, a file's (or a path's) own length, else the
+    longer of the trajectory and ``trajectory.period_s``. Dense samples are fitted with
+    a smooth curve, corners shaped with ``trajectory.shaping: min-jerk``, and a path
+    that starts or ends moving is eased in and out (an eased start and end lengthen the
+    flight by the ramp; :func:`~groundstation.control.shaping.shape_for_flight`). Then
+    the curve to be flown is checked against the limits and the volume
+    (:func:`flight_limits_from_config`, :func:`volume_from_config`). What it was taken
+    to be and its peaks are logged. Raises TrajectoryError (a file that cannot be read,
+    one line per broken limit) before anything is connected.
     ``trajectory.name: none`` is the :func:`commander_from_config`, flown until it lands.
     """
     if trajectory is None and config.trajectory.name == "none":  # flown by run-time commands
         return commander_from_config(config), math.inf
-    traj = trajectory if trajectory is not None else trajectory_from_config(config.trajectory)
-    if duration_s is None:
-        duration_s = traj.duration if traj.periodic and traj.duration > 0.0 \
-            else max(traj.duration, config.trajectory.period_s)
-    limits = flight_limits_from_config(config)
-    if config.trajectory.shaping == "min-jerk":
-        traj, duration_s = shape_for_flight(traj, duration_s, limits.max_accel_m_s2)
-    check_feasibility(traj, limits, volume=volume_from_config(config), horizon_s=duration_s)
-    return traj, duration_s
+    prepared = prepare_trajectory(config, trajectory, duration_s)
+    traj, r = prepared.trajectory, prepared.report
+    _log.info("trajectory", name=traj.name, taken_as=prepared.description,
+              duration_s=round(prepared.duration_s, 3), feasible=r.feasible,
+              max_speed_m_s=round(r.max_speed_m_s, 3), max_accel_m_s2=round(r.max_accel_m_s2, 3),
+              max_tilt_deg=round(math.degrees(r.max_tilt_rad), 2),
+              max_tilt_rate_rad_s=round(r.max_tilt_rate_rad_s, 3),
+              max_yaw_rate_deg_s=round(math.degrees(r.max_yaw_rate_rad_s), 2))
+    if r.problems:
+        raise TrajectoryError(f"trajectory {traj.name!r} cannot be flown:\n  "
+                              + "\n  ".join(r.problems))
+    return traj, prepared.duration_s
