@@ -596,6 +596,18 @@ class SafetyConfig(ConfigModel):
     gravity_check_deg: PositiveFloat = EkfParams().gravity_check_deg
     # [deg] preflight: the accelerometer's gravity must agree with the Vicon attitude
     on_signal: Literal["land", "handback"] = "land"  # what SIGINT/SIGTERM does
+    on_geofence: Literal["handback", "land"] = "handback"
+    # what leaving the volume does (the estimate or Vicon outside safety.volume_x/y/z):
+    # hand back to the pilot at once by default, as PX4's geofence "return to the pilot"
+    # action: a vehicle that left the volume is beyond what the controller was trusted with
+    on_second_stream: Literal["land", "hold"] = "land"
+    # what a second Vicon pose stream for our object does (another sender, a misconfigured
+    # Tracker): land, or hold position until it stops (landing if it lasts vicon_loss_land_s)
+    landing_confirm_s: float = Field(5.0, gt=0, le=30.0)
+    # a landing whose estimate reached the floor without evidence (Vicon, or the
+    # accelerometer's floor contact) for this long hands back with thrust at hover [s]:
+    # the landing creeps on down at 0.15 m/s meanwhile, 0.75 m, more than the
+    # supervisor's contact_height_m of dead-reckoning drift
     second_signal_after_s: float = Field(0.5, ge=0, le=10.0)
     # a second SIGINT/SIGTERM hands back at once only this long after the first [s];
     # closer ones are the same request: GNU `timeout` signals the process and then its

@@ -33,6 +33,9 @@ class SimFaultsConfig(ConfigModel):
     stall_duration_s: NonNegFloat = 0.0
     burst_delay_s: NonNegFloat = 0.0  # hold DATA and deliver it in bursts of this length
     delay_s: NonNegFloat = 0.0  # constant extra delivery delay of every DATA frame
+    thrust_faults: list[tuple[NonNegFloat, NonNegFloat, NonNegFloat]] = Field(
+        default_factory=list)
+    # (start_s, duration_s, lift_scale): the rotors give lift_scale x their lift meanwhile
 
 
 class SimViconConfig(ConfigModel):

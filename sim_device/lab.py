@@ -300,6 +300,12 @@ class VirtualLab:
         begin = self._goal_ns if start is None else seconds_to_ns(start)
         self.firmware.stalls.append((begin, begin + seconds_to_ns(duration)))
 
+    def thrust_fault(self, lift_scale: float, duration: float,
+                     start: float | None = None) -> None:
+        """The rotors give ``lift_scale`` times their lift for ``duration`` [s] from ``start``
+        (default: now): a motor or ESC fault the ground station does not command."""
+        self.plant.add_thrust_fault(self.t if start is None else start, duration, lift_scale)
+
     def vicon_outage(self, duration: float, start: float | None = None) -> None:
         """Lose Vicon tracking for ``duration`` [s] from ``start`` (default: now)."""
         self.vicon.add_outage(self.t if start is None else start, duration)

@@ -101,6 +101,8 @@ class PlantParams:
         accelerometer is concerned (the body rests at once): the IMU feels the
         deceleration -v/impact_time, and clips it like the real one. 0.05 s: skids
         and foam feet of a small quadrotor; thesis silent.
+    thrust_faults : ``(start [s], duration [s], lift_scale)`` windows in which the rotors
+        give ``lift_scale`` times their lift (fault injection; none by default)
     """
 
     mass: float = _VEHICLE.mass
@@ -116,6 +118,7 @@ class PlantParams:
     initial_position: Vec3 = (0.0, 0.0, 0.0)
     initial_yaw: float = 0.0
     impact_time: float = 0.05
+    thrust_faults: tuple[tuple[float, float, float], ...] = ()
 
     def __post_init__(self) -> None:
         _require(self.mass > 0 and self.g > 0, "plant.mass/g", (self.mass, self.g), "must be > 0")
@@ -130,6 +133,9 @@ class PlantParams:
         _require(0 <= self.battery_droop < 0.5 and self.battery_droop_time > 0,
                  "plant.battery_droop", (self.battery_droop, self.battery_droop_time),
                  "droop in [0, 0.5) over a positive time")
+        _require(all(len(f) == 3 and _finite(*f) and f[1] >= 0 and f[2] >= 0
+                     for f in self.thrust_faults), "plant.thrust_faults", self.thrust_faults,
+                 "(start, duration >= 0, lift scale >= 0) triples")
         _require(len(self.initial_position) == 3 and self.initial_position[2] <= 0,
                  "plant.initial_position", self.initial_position, "NED, z <= 0 (floor at 0)")
 
@@ -389,6 +395,8 @@ def _plant_params(config: GroundStationConfig, sim: SimConfig) -> PlantParams:
         battery_droop=sim.battery_droop, battery_droop_time=sim.battery_droop_time_s,
         initial_position=_vec3(sim.initial_position),
         initial_yaw=math.radians(sim.initial_yaw_deg),
+        thrust_faults=tuple((float(a), float(b), float(c))
+                            for a, b, c in sim.faults.thrust_faults),
     )
 
 

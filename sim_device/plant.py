@@ -54,6 +54,7 @@ class Plant:
         "_a_rate",
         "_a_rate_half",
         "_droop_rate",
+        "_faults",
         "_impact",
         "_impact_until",
         "_inflow",
@@ -106,6 +107,20 @@ class Plant:
             self.pz = 0.0
         self._impact = (0.0, 0.0, 0.0)  # touchdown deceleration felt by the IMU, FRD
         self._impact_until = -math.inf
+        self._faults: list[tuple[float, float, float]] = list(params.thrust_faults)
+
+    def add_thrust_fault(self, start: float, duration: float, lift_scale: float) -> None:
+        """From ``start`` [s] for ``duration`` [s] the rotors give ``lift_scale`` times the
+        lift they should (an ESC or motor fault: 2.0 doubles it, 0.5 halves it)."""
+        self._faults.append((float(start), float(start) + float(duration), float(lift_scale)))
+
+    def fault_factor(self, t: float) -> float:
+        """Product of the lift scales of the thrust faults active at ``t`` [s] (1 without)."""
+        factor = 1.0
+        for begin, end, scale in self._faults:
+            if begin <= t < end:
+                factor *= scale
+        return factor
 
     # ------------------------------------------------------------------ inputs
     def set_inputs(self, wx: float, wy: float, wz: float, lift: float) -> None:
@@ -141,6 +156,8 @@ class Plant:
         p = self.params
         dt = self.dt
         batt = max(0.5, 1.0 - self._droop_rate * (self.t + 0.5 * dt))
+        if self._faults:
+            batt *= self.fault_factor(self.t + 0.5 * dt)
         l0 = self.lift
         l_sp = self.lift_sp
         if self.on_ground:

@@ -93,13 +93,27 @@ def test_vicon_outage_holds_then_resumes(tmp_path: Path) -> None:
     assert drift.max() < 0.1, drift.max()  # flew on the IMU estimate; reached ~1 cm
 
 
-def test_long_vicon_outage_lands_on_the_imu_estimate(tmp_path: Path) -> None:
+def test_long_vicon_outage_lands_on_the_imu_and_never_disarms_in_the_air(
+        tmp_path: Path) -> None:
+    """Vicon goes for good: hold on the IMU, then land on it. The dead-reckoned height
+    drifts (here it went through the floor while the vehicle lifted off again), so it is
+    no evidence of the floor: the flight ends disarmed only if the accelerometer felt the
+    floor, else handed back to the pilot with the thrust it had, never with the motors
+    idled in the air."""
     result = run_logged(sim_config(), tmp_path, 30.0,
                         [(9.0, lambda f: f.lab.vicon_outage(30.0))])
     seq = states(result)
     assert seq[:4] == [State.TAKEOFF, State.TRACK, State.HOLD, State.LAND]
     assert "Vicon lost" in result.transitions[3].reason
-    assert result.final_state is State.DONE and on_the_ground(result)
+    assert not result.success
+    disarm = result.during(State.DISARM)
+    height = -result.trace["true_pos"][:, 2]
+    if State.DISARM in seq:
+        assert "ground contact felt" in result.transitions[4].reason
+        assert height[disarm].max() < 0.1 and on_the_ground(result)
+    else:
+        assert result.final_state is State.HANDBACK
+        assert result.trace["sticks"][:, 3][result.during(State.LAND)].min() > 0
 
 
 def narrow_volume(flight: InProcessFlight) -> None:
@@ -109,8 +123,19 @@ def narrow_volume(flight: InProcessFlight) -> None:
     sup.limits = dataclasses.replace(sup.limits, volume_x=(-0.2, 0.2))
 
 
-def test_leaving_the_volume_lands(tmp_path: Path) -> None:
+def test_leaving_the_volume_hands_back_at_once(tmp_path: Path) -> None:
+    """The default geofence action: the pilot gets the vehicle at once, and the vehicle
+    was outside the volume (by the truth) when it did."""
     cfg = sim_config(**{"trajectory.name": "square"})
+    result = run_logged(cfg, tmp_path, 20.0, [(12.0, narrow_volume)])
+    assert result.final_state is State.HANDBACK and not result.success
+    assert result.transitions[-1].reason.startswith("left the volume")
+    assert result.transitions[-1].t - 12.0 < 0.05
+    assert result.lab.truth.ctrl_mask == 0
+
+
+def test_leaving_the_volume_lands_when_configured(tmp_path: Path) -> None:
+    cfg = sim_config(**{"trajectory.name": "square", "safety.on_geofence": "land"})
     result = run_logged(cfg, tmp_path, 20.0, [(12.0, narrow_volume)])
     land = next(tr for tr in result.transitions if tr.new is State.LAND)
     assert "left the volume" in land.reason

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from groundstation.control.trajectory import YawTurn
-from groundstation.loop.mission import Mission
+from groundstation.loop.mission import CREEP_RAMP_S, Mission
 from groundstation.loop.supervisor import State
 from groundstation.types import Reference
 
@@ -214,7 +214,19 @@ def test_land_descends_to_below_the_ground() -> None:
     ref = m.reference(5.0 + 0.5 * descent)
     np.testing.assert_allclose(ref.position, [0.3, 0.1, -1.0 + 0.54])
     np.testing.assert_allclose(ref.velocity, [0.0, 0.0, 1.875 * 0.25])  # the peak, mid-way
-    np.testing.assert_allclose(m.reference(60.0).position, [0.3, 0.1, 0.08])
+    end = 5.0 + descent
+    np.testing.assert_allclose(m.reference(end).position, [0.3, 0.1, 0.08])
+    # then it creeps on down, its speed eased in over CREEP_RAMP_S, until the supervisor
+    # has evidence of the floor (a drifting height estimate never hovers "on" it)
+    ramp, creep = CREEP_RAMP_S, 0.15
+    mid = m.reference(end + 0.5 * ramp)
+    assert mid.velocity[2] == pytest.approx(0.5 * creep)  # the smoothstep's middle
+    # the smoothstep integral from 0 to 1/2: 10/64 - 15/160 + 6/384 = 5/64
+    assert mid.position[2] == pytest.approx(0.08 + creep * ramp * 5.0 / 64.0)
+    later = m.reference(end + ramp + 2.0)
+    np.testing.assert_allclose(later.velocity, [0.0, 0.0, creep])
+    np.testing.assert_allclose(later.position, [0.3, 0.1, 0.08 + creep * (0.5 * ramp + 2.0)])
+    np.testing.assert_allclose(later.acceleration, 0.0, atol=1e-15)
     m.enter(State.DISARM, 61.0, np.array([0.31, 0.12, 0.0]), 0.0)  # on the floor where it landed
     np.testing.assert_allclose(m.reference(61.5).position, [0.31, 0.12, 0.0])
 

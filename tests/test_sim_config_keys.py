@@ -47,6 +47,7 @@ CHANGES: dict[str, Any] = {
     "faults.stall_duration_s": 1.0,
     "faults.burst_delay_s": 0.1,
     "faults.delay_s": 0.01,
+    "faults.thrust_faults": [[12.0, 0.3, 2.0]],
     "vicon.rate_hz": 10.0,
     "vicon.latency_s": 0.01,
     "vicon.noise": False,

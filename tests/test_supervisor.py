@@ -95,15 +95,64 @@ def test_vicon_loss_holds_then_lands() -> None:
     assert sup.update(obs(t + 2.2, vicon_age_s=2.2, **FLYING_AT_1M)) is State.LAND
 
 
-@pytest.mark.parametrize(
-    "change",
-    [{"position": (1.6, 0.0, -1.0)}, {"position": (0.0, -1.6, -1.0)},
-     {"position": (0.0, 0.0, -2.1)}, {"tilt_rad": math.radians(40)}],
-)
-def test_geofence_and_tilt_land(change: dict[str, object]) -> None:
+def test_tilt_over_the_limit_lands() -> None:
     sup = Supervisor()
     t = airborne(sup)
+    assert sup.update(obs(t + 0.1, tilt_rad=math.radians(40), **FLYING_AT_1M)) is State.LAND
+
+
+OUTSIDE = [
+    {"position": (1.6, 0.0, -1.0)}, {"position": (0.0, -1.6, -1.0)},
+    {"position": (0.0, 0.0, -2.1)},  # the estimate beyond a side or the ceiling
+    {"vicon_position": (1.6, 0.0, -1.0)},  # Vicon there, the estimate still inside
+    {"vicon_position": (0.0, 0.0, -2.01)},
+    {"vicon_outside": (0.0, 0.0, -9.0)},  # a sighting beyond the plausible volume
+]
+
+
+@pytest.mark.parametrize("change", OUTSIDE)
+def test_leaving_the_volume_hands_back_at_once_with_an_error(change: dict[str, object]) -> None:
+    """The geofence acts on the truth as well as on the estimate (which may be wrong), and
+    hands back by default: the vehicle is beyond what the controller was trusted with."""
+    sup = Supervisor()
+    t = airborne(sup)
+    with capture_logs() as logs:
+        assert sup.update(obs(t + 0.1, **{**FLYING_AT_1M, **change})) is State.HANDBACK
+    assert sup.transitions[-1].failsafe and sup.outcome is Outcome.FAILSAFE
+    assert sup.transitions[-1].reason.startswith("left the volume")
+    assert [e["log_level"] for e in logs] == ["error"]
+
+
+@pytest.mark.parametrize("change", OUTSIDE)
+def test_leaving_the_volume_lands_when_configured(change: dict[str, object]) -> None:
+    sup = Supervisor(SupervisorLimits(on_geofence="land"))
+    t = airborne(sup)
     assert sup.update(obs(t + 0.1, **{**FLYING_AT_1M, **change})) is State.LAND
+    # still outside while landing: it goes on landing
+    assert sup.update(obs(t + 0.2, **{**FLYING_AT_1M, **change})) is State.LAND
+
+
+def test_a_landing_that_leaves_the_volume_is_handed_back() -> None:
+    """The thrust-fault fly-away: landing on an estimate near 1 m while Vicon shows the
+    vehicle climbing through the ceiling."""
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.1, trajectory_done=True, **FLYING_AT_1M)) is State.LAND
+    assert sup.update(obs(t + 0.2, vicon_position=(0.0, 0.0, -1.9), **FLYING_AT_1M)) \
+        is State.LAND
+    assert sup.update(obs(t + 0.3, vicon_position=(0.0, 0.0, -2.05), **FLYING_AT_1M)) \
+        is State.HANDBACK
+
+
+@pytest.mark.parametrize("where", ["position", "vicon_position"])
+def test_the_floor_is_no_fence(where: str) -> None:
+    """Nothing flies through the floor: below it is an estimate or an origin that is off,
+    never a vehicle that left (a landing aims 10 cm below the floor)."""
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.1, trajectory_done=True, **FLYING_AT_1M)) is State.LAND
+    low = {where: (0.0, 0.0, 0.08), "height_above_ground_m": -0.08}
+    assert sup.update(obs(t + 0.2, **low)) is State.LAND
 
 
 def test_a_landing_that_loses_the_attitude_is_handed_back() -> None:
@@ -258,7 +307,6 @@ def test_outcome_completed_stopped_and_failsafe() -> None:
 
 
 @pytest.mark.parametrize("change", [
-    {"position": (3.0, 0.0, -1.0)},  # geofence
     {"tilt_rad": math.radians(50.0)},  # e.g. H-infinity over the tilt limit
     {"vicon_age_s": 5.0},  # Vicon lost 5 s
 ])
@@ -373,3 +421,98 @@ def test_transition_kinds_decide_what_a_report_explains() -> None:
     line = states_line(held.transitions)
     assert line.startswith("TAKEOFF -> TRACK -> HOLD (")
     assert "TRACK (Vicon back)" in line and line.count("(") == 3
+
+
+def land_from_1m(sup: Supervisor) -> float:
+    t = airborne(sup)
+    assert sup.update(obs(t + 1, trajectory_done=True, **FLYING_AT_1M)) is State.LAND
+    return t + 1
+
+
+def test_a_landing_on_dead_reckoning_alone_is_not_confirmed_and_is_handed_back() -> None:
+    """The fly-away's end: the estimate (Vicon lost, IMU only) reached the floor with the
+    vehicle 9 m up. Without Vicon and without the floor's contact signature nothing is
+    disarmed: after landing_confirm_s the pilot gets the vehicle with the thrust it had."""
+    sup = Supervisor()
+    t = land_from_1m(sup)
+    blind = {"vicon_age_s": 3.0, "position": (0.0, 0.0, -0.01), "height_above_ground_m": 0.01,
+             "lift_fraction": 0.95, "specific_force_g": 1.0}
+    for dt in (0.1, 0.7, 1.5, 2.55):
+        assert sup.update(obs(t + dt, **blind)) is State.LAND
+    assert sup.update(obs(t + 2.65, **blind)) is State.HANDBACK
+    assert "landing not confirmed" in sup.transitions[-1].reason
+    assert sup.transitions[-1].failsafe and not any(
+        tr.new is State.DISARM for tr in sup.transitions)
+
+
+@pytest.mark.parametrize(("height", "vicon_age", "disarmed"), [
+    (0.01, 0.01, True),  # the estimate at the floor while Vicon is fused
+    (0.30, 3.0, True),  # contact felt near the floor on dead reckoning (drifted 30 cm)
+    (1.90, 3.0, False),  # "contact" with the estimate 1.9 m up: a thrust fault, not a floor
+    (0.30, 0.01, False),  # Vicon fused says 30 cm: whatever the accelerometer says, not down
+])
+def test_floor_contact_counts_only_near_the_floor(height: float, vicon_age: float,
+                                                  disarmed: bool) -> None:
+    sup = Supervisor()
+    t = land_from_1m(sup)
+    felt = {"vicon_age_s": vicon_age, "position": (0.0, 0.0, -height),
+            "height_above_ground_m": height, "lift_fraction": 0.3, "specific_force_g": 1.0}
+    sup.update(obs(t + 0.1, **felt))
+    end = sup.update(obs(t + 0.7, **felt))
+    assert end is (State.DISARM if disarmed else State.LAND)
+
+
+def test_an_estimate_overruled_by_vicon_lands() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    why = "3 consistent Vicon poses disagreed with the estimate for 0.30 s"
+    assert sup.update(obs(t + 0.1, overruled=why, **FLYING_AT_1M)) is State.LAND
+    assert sup.transitions[-1].failsafe and why in sup.transitions[-1].reason
+
+
+def test_a_reference_fault_lands() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    why = "it asks 82 deg of tilt (69.0 m/s^2)"
+    assert sup.update(obs(t + 0.1, reference_fault=why, **FLYING_AT_1M)) is State.LAND
+    assert sup.transitions[-1].reason == f"reference fault: {why}"
+
+
+def test_a_second_vicon_stream_lands_by_default() -> None:
+    sup = Supervisor()
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.1, vicon_rivals=1, **FLYING_AT_1M)) is State.LAND
+    assert "second Vicon pose stream" in sup.transitions[-1].reason
+    assert sup.transitions[-1].failsafe
+
+
+def test_a_second_vicon_stream_holds_until_it_stops_when_configured() -> None:
+    sup = Supervisor(SupervisorLimits(on_second_stream="hold"))
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.1, vicon_rivals=1, **FLYING_AT_1M)) is State.HOLD
+    assert sup.update(obs(t + 0.5, vicon_rivals=1, **FLYING_AT_1M)) is State.HOLD
+    assert sup.update(obs(t + 0.6, **FLYING_AT_1M)) is State.TRACK
+    assert sup.update(obs(t + 0.7, vicon_rivals=1, **FLYING_AT_1M)) is State.HOLD
+    assert sup.update(obs(t + 2.6, vicon_rivals=1, **FLYING_AT_1M)) is State.HOLD
+    assert sup.update(obs(t + 2.8, vicon_rivals=1, **FLYING_AT_1M)) is State.LAND
+
+
+@pytest.mark.parametrize(("change", "failure"), [
+    ({"position": (2.0, 0.0, 0.0)}, "outside the volume"),
+    ({"vicon_rivals": 1}, "second Vicon pose stream"),
+])
+def test_preflight_refuses_a_vehicle_outside_the_volume_or_two_streams(
+        change: dict[str, object], failure: str) -> None:
+    sup = Supervisor(SupervisorLimits(preflight_timeout_s=1.0))
+    assert sup.update(obs(0.0, **change)) is State.PREFLIGHT
+    assert sup.update(obs(1.1, **change)) is State.ABORTED
+    assert failure in sup.transitions[-1].reason
+
+
+def test_a_vicon_preflight_failure_says_what_the_pose_filter_saw() -> None:
+    sup = Supervisor(SupervisorLimits(preflight_timeout_s=1.0))
+    seen = "412 datagrams, 0 poses of 'X3D' passed: 412 refused as held-identity"
+    silent = {"vicon_rate_hz": 0.0, "vicon_age_s": math.inf, "vicon_diagnosis": lambda: seen}
+    assert sup.update(obs(0.0, **silent)) is State.PREFLIGHT
+    assert sup.update(obs(1.1, **silent)) is State.ABORTED
+    assert sup.transitions[-1].reason.endswith(f"Vicon: {seen}")

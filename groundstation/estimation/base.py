@@ -60,6 +60,12 @@ class Estimator(Protocol):
         """Time since the last fused pose [s] (inf before :meth:`initialise`)."""
         ...
 
+    @property
+    def overruled(self) -> tuple[int, str]:
+        """How often Vicon poses that agreed with each other but not with the estimate
+        re-anchored it (the estimate was wrong: a failsafe), and a line on the last time."""
+        ...
+
     def health(self) -> EkfHealth:
         """Counters and consistency figures for telemetry."""
         ...
@@ -139,6 +145,11 @@ class PoseHoldEstimator:
         return False
 
     @property
+    def overruled(self) -> tuple[int, str]:
+        """Never: every pose is taken as it is."""
+        return 0, ""
+
+    @property
     def time_since_fix(self) -> float:
         """Time of the newest IMU sample minus the held pose's [s] (inf before a pose)."""
         return self._t - self._pose.t if self._pose is not None else math.inf
@@ -148,6 +159,6 @@ class PoseHoldEstimator:
         return EkfHealth(
             t=self._t, initialised=self._pose is not None, time_since_fix=self.time_since_fix,
             covariance_trace=math.nan, diverged=False, last_nis=math.nan, updates=self._updates,
-            gated=0, repeated_poses=0, lost_tracking=0, too_old=0, invalid_poses=0, resets=0,
+            gated=0, repeated_poses=0, forced_resets=0, too_old=0, invalid_poses=0, resets=0,
             late_poses=0, repeated_imu=0, invalid_imu=0, stale_imu=0, implausible_poses=0,
             refused_resets=0)

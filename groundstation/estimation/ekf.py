@@ -29,15 +29,27 @@ stored IMU samples, re-applying the poses fused since.
 
 Fault handling (Ch. 7.3): Algorithm 1 (a repeated IMU counter/values or a
 repeated pose is not new information and is skipped - the thesis's ``R = 1e8``
-has the same effect), Algorithm 2 (an identity quaternion means Vicon lost the
-object: skipped), and a chi-square innovation gate that rejects and counts
-outliers. A pose outside the plausible volume is refused before any arithmetic
-(issue 14). After persistent gating the filter re-anchors position and attitude,
-but only on ``gate_reset_count`` consecutive gated poses that agree with each other
-and with the IMU prediction within its covariance plus what the IMU may have
-missed (see :class:`EkfParams`): never on one pose, and never on a jump the IMU
-did not see. A repeated pose is one with identical values: a frame number alone
-says nothing (another sender may reuse Tracker's).
+has the same effect) and a chi-square innovation gate that rejects and counts
+outliers. Algorithm 2 (the lab's lost-tracking encodings) belongs to the pose
+filter (:mod:`groundstation.vicon.posefilter`), which knows the raw values: an
+identity attitude is a level vehicle at heading 0 as far as the filter knows. A
+pose outside the plausible volume is refused before any arithmetic.
+
+The evidence outranks the estimate. After persistent gating the filter
+re-anchors position and attitude on ``gate_reset_count`` consecutive gated poses
+that agree with each other (never on one pose):
+
+* at once (``gate_reset_after``) when the IMU prediction explains them within its
+  covariance plus what the IMU may have missed (a touchdown that clipped the
+  accelerometer): an ordinary correction;
+* after ``evidence_after`` without a fused pose even when it does not: poses that
+  keep agreeing with each other but not with the estimate mean the estimate is
+  wrong (an accelerometer saturated by a thrust fault, a knock), and refusing the
+  truth indefinitely flies the vehicle blind. Such a re-anchoring is counted
+  (:attr:`Ekf.overruled`) and the supervisor treats it as a failsafe.
+
+A repeated pose is one with identical values: a frame number alone says nothing
+(another sender may reuse Tracker's).
 """
 
 from __future__ import annotations
@@ -63,6 +75,11 @@ _NAN = float("nan")
 _NOT_INIT = UpdateResult(False, _NAN, "not_initialised")
 _POSITION_SLACK = 0.02  # [m] jump always allowed between reset candidates (the pose filter's)
 _ANGLE_SLACK = 0.05  # [rad] rotation always allowed between reset candidates (likewise)
+FORCED_VELOCITY_VAR = 1.0
+"""Velocity variance per axis after a re-anchoring the IMU did not explain [(m/s)^2]: the
+IMU missed a motion (a saturated accelerometer), so the velocity is known to about 1 m/s
+and the next poses correct it; large enough to accept them at 10 Hz, small enough that
+the covariance stays below the divergence trace."""
 
 
 class _Fused:
@@ -73,7 +90,7 @@ class _Fused:
     def __init__(self, pose: Pose, mode: str) -> None:
         self.t = float(pose.t)
         self.pose = pose
-        self.mode = mode  # "ok" or "reset"
+        self.mode = mode  # "ok", "reset" or "forced" (a re-anchoring the IMU did not explain)
 
     def __lt__(self, other: _Fused) -> bool:
         return self.t < other.t
@@ -280,7 +297,7 @@ class Ekf:
             updates=self.updates,
             gated=self.gated,
             repeated_poses=self.repeated_poses,
-            lost_tracking=self.lost_tracking,
+            forced_resets=self.forced_resets,
             too_old=self.too_old + self.future,
             invalid_poses=self.invalid_poses,
             resets=self.resets,
@@ -296,9 +313,15 @@ class Ekf:
     def verdicts(self) -> tuple[int, int, float]:
         """Poses judged (fused or gated), poses refused for any reason, and the last NIS:
         see :attr:`groundstation.estimation.base.Estimator.verdicts`."""
-        refused = (self.gated + self.repeated_poses + self.lost_tracking + self.too_old
-                   + self.future + self.invalid_poses + self.implausible_poses)
+        refused = (self.gated + self.repeated_poses + self.too_old + self.future
+                   + self.invalid_poses + self.implausible_poses)
         return self.updates + self.gated, refused, self.last_nis
+
+    @property
+    def overruled(self) -> tuple[int, str]:
+        """How often the evidence overruled the estimate (consistent poses it could not
+        explain re-anchored it after ``evidence_after``), and a line on the last time."""
+        return self.forced_resets, self._overruled_reason
 
     @property
     def time_since_fix(self) -> float:
@@ -335,12 +358,13 @@ class Ekf:
 
     # ------------------------------------------------------------------ internals
     def _reset_counters(self) -> None:
-        self.updates = self.gated = self.repeated_poses = self.lost_tracking = 0
+        self.updates = self.gated = self.repeated_poses = self.forced_resets = 0
         self.too_old = self.future = self.invalid_poses = self.resets = self.late_poses = 0
         self.repeated_imu = self.invalid_imu = self.stale_imu = 0
         self.implausible_poses = self.refused_resets = 0
         self.consecutive_gated = 0
-        self._candidates: list[Pose] = []
+        self._candidates: list[tuple[Pose, bool]] = []  # consistent gated poses, explained
+        self._overruled_reason = ""
         self.last_nis = _NAN
         self._first_imu = False
         self._t_fix = _NAN
@@ -358,9 +382,6 @@ class Ekf:
         if box is not None and not all(lo <= v <= hi for v, (lo, hi) in zip(p, box, strict=True)):
             self.implausible_poses += 1
             return UpdateResult(False, _NAN, "implausible")
-        if q == [1.0, 0.0, 0.0, 0.0]:  # Algorithm 2: the lab's lost-tracking encoding
-            self.lost_tracking += 1
-            return UpdateResult(False, _NAN, "lost_tracking")
         last = self._last_pose
         self._last_pose = pose
         if last is not None and p == last.position.tolist() and q == last.quaternion.tolist():
@@ -392,7 +413,8 @@ class Ekf:
         """Fuse a live/new pose with the gate, or re-apply an already fused one."""
         if new is None or item is new:
             return self._fuse(item.pose, gate=True)
-        self._correct(item.pose, gate=False, reset=item.mode == "reset")
+        self._correct(item.pose, gate=False, reset=item.mode != "ok",
+                      forced=item.mode == "forced")
         return None
 
     def _propagate_to(self, t: float, gyro: FloatArray, acc: FloatArray) -> None:
@@ -464,9 +486,14 @@ class Ekf:
         a run of reset candidates; counts and records it."""
         mode = "ok"
         nis, applied = self._correct(pose, gate=gate, reset=False)
-        if not applied and self._completes_reset(pose):
-            mode = "reset"
-            nis, applied = self._correct(pose, gate=False, reset=True)
+        if not applied:
+            reset = self._completes_reset(pose)
+            if reset is not None:
+                mode = reset
+                if reset == "forced":
+                    self._note_overruled(pose)
+                nis, applied = self._correct(pose, gate=False, reset=True,
+                                             forced=reset == "forced")
         self.last_nis = nis
         if not applied:
             self.gated += 1
@@ -475,30 +502,45 @@ class Ekf:
         self.consecutive_gated = 0
         self._candidates.clear()
         self.updates += 1
-        self.resets += mode == "reset"
+        self.resets += mode != "ok"
+        self.forced_resets += mode == "forced"
         self._t_fix = max(self._t_fix, float(pose.t))
         self._fused.append(_Fused(pose, mode))
         while self._fused and self._fused[0].t < self._hist.oldest_time():
             self._fused.popleft()
         return UpdateResult(True, nis, "ok" if mode == "ok" else "reset")
 
-    def _completes_reset(self, pose: Pose) -> bool:
-        """Count the gated ``pose`` as a reset candidate (see :class:`EkfParams`); True if
-        it completes a run of ``gate_reset_count`` after ``gate_reset_after`` without a fix."""
+    def _completes_reset(self, pose: Pose) -> str | None:
+        """Count the gated ``pose`` as a reset candidate (see :class:`EkfParams`): ``"reset"``
+        if it completes a run of ``gate_reset_count`` consistent candidates the IMU explains,
+        ``gate_reset_after`` without a fix; ``"forced"`` if it completes a run of consistent
+        ones ``evidence_after`` without a fix, explained or not; else None."""
         p, run = self.params, self._candidates
-        if not self._explained(pose):
+        if run and not self._consistent(run[-1][0], pose):
             self.refused_resets += 1
             run.clear()
-            return False
-        if run and not self._consistent(run[-1], pose):
-            self.refused_resets += 1
-            run.clear()
-        run.append(pose)
+        explained = self._explained(pose)
+        run.append((pose, explained))
         del run[:-p.gate_reset_count]
-        if len(run) < p.gate_reset_count or self._t - self._t_fix < p.gate_reset_after:
-            return False
-        run.clear()
-        return True
+        since = self._t - self._t_fix
+        if len(run) >= p.gate_reset_count:
+            if since >= p.gate_reset_after and all(e for _, e in run):
+                run.clear()
+                return "reset"
+            if since >= p.evidence_after:
+                run.clear()
+                return "forced"
+        if not explained:
+            self.refused_resets += 1
+        return None
+
+    def _note_overruled(self, pose: Pose) -> None:
+        """Describe a forced re-anchoring on ``pose`` (before the estimate moves)."""
+        jump = float(np.linalg.norm(pose.position - self._x[0:3]))
+        self._overruled_reason = (
+            f"{self.params.gate_reset_count} consistent Vicon poses disagreed with the "
+            f"estimate for {self._t - self._t_fix:.2f} s (by {100.0 * jump:.0f} cm, more than "
+            "the IMU can explain): re-anchored on Vicon")
 
     def _explained(self, pose: Pose) -> bool:
         """The innovation of ``pose`` passes the gate with ``R`` grown by what the IMU may
@@ -531,11 +573,13 @@ class Ekf:
         return (jump <= p.max_speed * dt + _POSITION_SLACK
                 and angle <= p.max_rotation_rate * dt + _ANGLE_SLACK)
 
-    def _correct(self, pose: Pose, gate: bool, reset: bool) -> tuple[float, bool]:
-        """Measurement update at the filter time. Returns ``(nis, applied)``."""
+    def _correct(self, pose: Pose, gate: bool, reset: bool,
+                 forced: bool = False) -> tuple[float, bool]:
+        """Measurement update at the filter time (``reset``: re-anchored on ``pose`` first,
+        ``forced``: one the IMU did not explain). Returns ``(nis, applied)``."""
         x, P, y = self._x, self._P, self._y
         if reset:
-            self._reset_pose(pose)
+            self._reset_pose(pose, forced)
         y[0:3] = pose.position - x[0:3]
         y[3:6] = _attitude_residual(x[3:7].tolist(), pose.quaternion.tolist())
         S = P[0:6, 0:6] + self._R
@@ -566,7 +610,7 @@ class Ekf:
         x[7:16] += dx[6:15]
         return nis, True
 
-    def _reset_pose(self, pose: Pose) -> None:
+    def _reset_pose(self, pose: Pose, forced: bool = False) -> None:
         """Re-initialise position and attitude from ``pose``, and forget the velocity's
         certainty: all three get the initial variance and lose their correlations.
 
@@ -582,6 +626,8 @@ class Ekf:
         P[0:9, :] = 0.0
         P[:, 0:9] = 0.0
         P.flat[: 9 * (N_ERR + 1) : N_ERR + 1] = self.params.initial_error_variance()[0:9]
+        if forced:  # the IMU missed the motion: its velocity is a guess
+            P.flat[6 * (N_ERR + 1) : 9 * (N_ERR + 1) : N_ERR + 1] = FORCED_VELOCITY_VAR
 
     def _replay(self, pose: Pose) -> UpdateResult:
         """Apply a pose older than the filter time: restore the checkpoint at or before

@@ -42,11 +42,10 @@ Box = tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
 
 UpdateReason = Literal[
     "ok",  # applied at its time stamp
-    "reset",  # applied as a re-initialisation after persistent gating
+    "reset",  # applied as a re-initialisation after persistent gating (or forced: see Ekf)
     "deferred",  # newer than the last IMU sample: queued, applied when the IMU reaches it
     "gated",  # chi-square gate rejected the innovation (outlier)
     "repeated",  # Algorithm 1: same frame number or identical values as the previous pose
-    "lost_tracking",  # Algorithm 2: identity quaternion = Vicon lost the object
     "too_old",  # older than the re-propagation window
     "future",  # further ahead of the IMU than the window (clock problem)
     "invalid",  # non-finite values or a quaternion far from unit norm
@@ -99,9 +98,14 @@ class EkfParams:
         may have missed and a reset may correct: a touchdown or knock that clipped the
         accelerometer (the landing test's 0.3 m/s stop leaves ~0.1 m after 0.3 s). With
         the 5.3 sigma of the gate that allows ~0.21 m and 15 deg; a larger disagreement is
-        not the IMU's but a wrong Vicon pose (a reflection, another sender), or a wrong
-        estimate that a pose cannot prove wrong: it is refused (counted), Vicon is then
-        as good as lost, and the supervisor's Vicon-loss failsafe acts.
+        not the IMU's: a wrong Vicon pose (a reflection, another sender) or a wrong
+        estimate. A single such pose is refused (counted); poses that keep agreeing with
+        each other for ``evidence_after`` prove the estimate wrong (below).
+    evidence_after : [s] without a fused pose after which ``gate_reset_count`` consecutive
+        gated poses that agree with each other re-anchor the estimate even when the IMU
+        prediction cannot explain them (counted as overruled; the supervisor lands). 0.3 s:
+        below the supervisor's 0.5 s Vicon-loss hold, so refused truth never reads as a lost
+        Vicon, and 3 poses at 10 Hz; long enough for an isolated burst of reflections.
     max_speed, max_rotation_rate : the consistency gate between reset candidates [m/s],
         [rad/s] (``vicon.max_speed_m_s``, ``vicon.max_rotation_rate_rad_s``).
     plausible_volume : where a pose can be, NED [m] ((x_min, x_max), (y_min, y_max),
@@ -131,6 +135,7 @@ class EkfParams:
     max_vicon_delay: float = 0.2
     gate_reset_after: float = 0.2
     gate_reset_count: int = 3
+    evidence_after: float = 0.3
     reset_position_sigma: float = 0.04
     reset_attitude_sigma: float = 0.05
     max_speed: float = 5.0
@@ -150,7 +155,7 @@ class EkfParams:
         _check_positive("vicon_quaternion_var", self.vicon_quaternion_var, 4)
         _check_positive("initial_variance", self.initial_variance, 16)
         for name in ("g", "imu_period", "gyro_bias_walk", "acc_bias_walk", "process_noise_scale",
-                     "min_measurement_var", "max_vicon_delay", "gate_reset_after",
+                     "min_measurement_var", "max_vicon_delay", "gate_reset_after", "evidence_after",
                      "divergence_trace", "max_step", "stationary_gyro_std",
                      "gravity_check_deg", "reset_position_sigma", "reset_attitude_sigma",
                      "max_speed", "max_rotation_rate"):  # fmt: skip
@@ -283,7 +288,8 @@ class EkfHealth:
     covariance_trace : trace of the covariance in the 16-state layout.
     diverged : trace above ``divergence_trace``.
     last_nis : NIS of the last applied or gated update (NaN before one).
-    updates, gated, repeated_poses, lost_tracking, too_old (also counts poses too
+    updates, gated, repeated_poses, forced_resets (re-anchorings on poses the IMU could not
+    explain: the estimate was wrong), too_old (also counts poses too
     far ahead of the IMU), invalid_poses, resets, late_poses (older than the
     filter time: fused by restoring a checkpoint and re-propagating),
     implausible_poses (outside the plausible volume), refused_resets (gated poses that
@@ -302,7 +308,7 @@ class EkfHealth:
     updates: int
     gated: int
     repeated_poses: int
-    lost_tracking: int
+    forced_resets: int
     too_old: int
     invalid_poses: int
     resets: int

@@ -11,8 +11,13 @@ Per tick (one DATA sample, 100 Hz):
    fuse every Vicon pose at its own time stamp; the filter runs one IMU sample
    behind and the estimate handed on is predicted to the newest sample (see
    :meth:`FlightCore.estimate_step`);
-2. supervisor: observe link, Vicon, estimator, pilot and position; change state;
-3. mission: the reference for the current phase;
+2. supervisor: observe link, Vicon, estimator, pilot and position; change state. The
+   supervisor sees the truth beside the estimate: the newest Vicon pose and sightings
+   outside the volume (the geofence acts on either), rival pose streams, and when the
+   estimator had to be re-anchored on poses it could not explain (it was wrong);
+3. mission: the reference for the current phase; while tracking, a reference beyond
+   what the feasibility check allows (:mod:`groundstation.control.envelope`) is a
+   fault: its acceleration and jerk are not fed forward and the supervisor lands;
 4. when a COMMAND is due (at the configured command rate, and at once on a
    change between commanding and not commanding): controller (with the mission's
    preview of the reference when it asks for one) -> body rates and F_z -> stick
@@ -35,12 +40,17 @@ from groundstation.asctec.channels import ChannelHandover
 from groundstation.asctec.messages import ALL_CHANNELS_MASK, Channel, CommandMsg
 from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller, heading_of
+from groundstation.control.envelope import ReferenceEnvelope
 from groundstation.control.sticks import StickParams, to_sticks
 from groundstation.control.trajectory import Trajectory
 from groundstation.estimation.base import Estimator
 from groundstation.estimation.ekf import Ekf
 from groundstation.estimation.records import EkfParams, InitReport
-from groundstation.loop.assemble import controller_from_config, trajectory_for_flight
+from groundstation.loop.assemble import (
+    controller_from_config,
+    flight_limits_from_config,
+    trajectory_for_flight,
+)
 from groundstation.loop.commander import Commander
 from groundstation.loop.inputs import InputHealth, VehicleStatus, quadrotor_params
 from groundstation.loop.mission import Mission
@@ -94,7 +104,8 @@ def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
         min_data_rate_hz=0.8 * 1000.0 / config.serial.data_period_ms,
         min_vicon_rate_hz=config.vicon.min_rate_hz, on_signal=s.on_signal,
         battery_land_v=s.battery_land_v, battery_grace_s=s.battery_grace_s,
-        pilot_grace_s=pilot_grace_s(config),
+        pilot_grace_s=pilot_grace_s(config), on_geofence=s.on_geofence,
+        on_second_stream=s.on_second_stream, landing_confirm_s=s.landing_confirm_s,
     )
 
 
@@ -162,7 +173,10 @@ class FlightCore:
         self._held: ImuSample | None = None
         self._estimate: StateEstimate | None = None
         self._judged = self._refused = 0  # the estimator's pose counts at the last tick
+        self._overruled = 0  # the estimator's re-anchorings on unexplained poses, so far
         self._land_request = ""
+        self._envelope = ReferenceEnvelope.from_limits(flight_limits_from_config(config))
+        self._reference_fault = ""  # found on the last tick's reference, for this one
 
     # ------------------------------------------------------------------ public
     @property
@@ -207,6 +221,8 @@ class FlightCore:
         if state is not old:
             self._enter(state, old, t, position)
         reference = self.mission.reference(t)
+        if state is State.TRACK:
+            reference = self._guard(reference)
         if self.commander is not None:
             if old is State.TRACK and state is not State.TRACK:
                 self.commander.preempt(self.mission.trajectory_time,
@@ -286,6 +302,33 @@ class FlightCore:
             return self.ekf.estimate()
         return self.ekf.estimate_ahead(self._held)
 
+    def _guard(self, reference: Reference) -> Reference:
+        """``reference`` if it is inside the envelope; else the fault is kept for the
+        supervisor (it lands on the next tick) and the reference's acceleration and jerk
+        are not fed forward: a fault is not an input."""
+        fault = self._envelope.fault(reference)
+        if not fault:
+            return reference
+        if not self._reference_fault:
+            self._reference_fault = f"at trajectory time {self.mission.trajectory_time:.2f} s " \
+                f"{fault}"
+        zero = np.zeros(3)
+        position = reference.position if np.isfinite(reference.position).all() \
+            else self._position().copy()
+        velocity = reference.velocity if np.isfinite(reference.velocity).all() else zero
+        return Reference(t=reference.t, position=position, velocity=velocity,
+                         acceleration=zero, jerk=zero, yaw=reference.yaw if math.isfinite(
+                             reference.yaw) else 0.0)
+
+    def _overruled_now(self) -> str:
+        """Why the estimator was re-anchored on Vicon poses it could not explain since the
+        last tick ("" if it was not)."""
+        count, reason = self.ekf.overruled
+        if count == self._overruled:
+            return ""
+        self._overruled = count
+        return reason
+
     def _verdicts(self) -> tuple[float, int]:
         """(NIS of the last pose judged this tick or NaN, poses refused this tick) from the
         estimator's running counts (a pose newer than the filter is judged a tick later,
@@ -325,8 +368,18 @@ class FlightCore:
             pilot_enabled=vehicle.pilot_enabled, vehicle_applying=vehicle.applying,
             stop_requests=stop_requests, lift_fraction=self._lift_fraction,
             specific_force_g=force_g, battery_v=vehicle.battery_v,
-            land_request=self._land_request,
+            land_request=self._land_request, vicon_position=self._fresh_vicon(health),
+            vicon_outside=health.vicon_outside, vicon_rivals=health.vicon_rivals,
+            overruled=self._overruled_now() if self.init_report is not None else "",
+            reference_fault=self._reference_fault, vicon_diagnosis=health.vicon_diagnosis,
         )
+
+    def _fresh_vicon(self, health: InputHealth) -> tuple[float, float, float] | None:
+        """The newest pose the pose filter passed, if Vicon has not been silent longer than
+        the loss-hold time (an older one says nothing about where the vehicle is now)."""
+        if health.vicon_age_s > self.supervisor.limits.vicon_loss_hold_s:
+            return None
+        return health.vicon_last
 
     def _vicon_age(self, health: InputHealth) -> float:
         """Time since the last pose the pose filter passed or, once the estimator runs,

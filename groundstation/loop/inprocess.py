@@ -14,6 +14,7 @@ Used by the tests and the virtual lab's evaluation suite (``gs eval --fast``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -109,6 +110,7 @@ class InProcessFlight:
         self._poses = PoseFilter.from_config(config.vicon, config.safety)
         self._period = config.serial.data_period_ms / 1000.0
         self.stop_requests = 0
+        self._vicon_last: tuple[float, float, float] | None = None
         self.trace = FlightTrace()
         self.compute_times: list[float] = []
         """Wall time of each FlightCore.tick [s]: the code's back-to-back cost."""
@@ -130,6 +132,9 @@ class InProcessFlight:
             pose = self._poses.process(datagram.data, datagram.t)
             if pose is not None:
                 out.append(pose)
+        if out:
+            p = out[-1].position
+            self._vicon_last = (float(p[0]), float(p[1]), float(p[2]))
         return out
 
     def step(self) -> None:
@@ -147,7 +152,9 @@ class InProcessFlight:
     def _tick(self, t: float, msg: DataMsg | None, poses: Sequence[Pose]) -> None:
         imu = self._front.receive(t, msg) if msg is not None else None
         rate = self._poses.rate
-        health = self._front.health(t, rate.time_since_pose(t), rate.rate(t))
+        health = dataclasses.replace(
+            self._front.health(t, rate.time_since_pose(t), rate.rate(t)),
+            vicon_last=self._vicon_last)
         start = time.perf_counter()
         result = self.core.tick(t, imu, poses, self._front.status, health, self.stop_requests)
         compute = time.perf_counter() - start

@@ -8,6 +8,7 @@ STATUS and RC blocks, and measure the DATA rate and age.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,12 +51,21 @@ class InputHealth:
 
     data_age_s, data_rate_hz : time since the last DATA frame [s], its rate [Hz]
     vicon_age_s, vicon_rate_hz : time since the last accepted pose [s], its rate [Hz]
+    vicon_last : NED [m] of the newest pose the pose filter passed (None before one)
+    vicon_outside : NED [m] of a confirmed Vicon sighting beyond the plausible volume that
+        is newer than any pose passed (None if there is none)
+    vicon_rivals : confirmed pose streams of the object besides the one followed, now
+    vicon_diagnosis : what the pose filter saw, in one line (called only when needed)
     """
 
     data_age_s: float
     data_rate_hz: float
     vicon_age_s: float
     vicon_rate_hz: float
+    vicon_last: tuple[float, float, float] | None = None
+    vicon_outside: tuple[float, float, float] | None = None
+    vicon_rivals: int = 0
+    vicon_diagnosis: Callable[[], str] | None = None
 
 
 def _vec3(values: list[float]) -> tuple[float, float, float]:

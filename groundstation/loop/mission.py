@@ -23,8 +23,11 @@ from a speed and an acceleration limit, so the acceleration never steps.
 * TRACK: the trajectory, on its own time axis, paused while in HOLD.
 * HOLD: the position where the hold began, the heading the vehicle had then.
 * LAND: descend from where landing began at ``land_speed`` (same profile) to just
-  below the ground height (so the vehicle really touches down), then stay there;
-  the heading the vehicle had when the landing began.
+  below the ground height (so the vehicle really touches down), then creep on down at
+  ``creep_speed`` (its velocity eased in over ``creep_ramp_s``): a landing flown on a
+  drifting dead-reckoned height keeps pushing down until the vehicle feels the floor,
+  instead of hovering where the estimate says the floor is; the heading the vehicle had
+  when the landing began.
 * DISARM and after: where the vehicle was when the phase began (it is on the
   floor; before take-off, the origin), with its heading then.
 
@@ -39,7 +42,12 @@ import math
 
 import numpy as np
 
-from groundstation.control.minjerk import MinJerkSegment, min_jerk_duration
+from groundstation.control.minjerk import (
+    MinJerkSegment,
+    min_jerk_duration,
+    smoothstep,
+    smoothstep_integral,
+)
 from groundstation.control.trajectory import Trajectory
 from groundstation.loop.supervisor import State
 from groundstation.types import FloatArray, Reference
@@ -49,6 +57,9 @@ def wrap_angle(angle: float) -> float:
     """``angle`` [rad] wrapped to ``[-pi, pi)``."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
+
+CREEP_RAMP_S = 1.0
+"""Time over which the landing's creep below the floor eases in [s]."""
 
 MOVE_JERK_M_S3 = 2.0
 """Peak jerk [m/s^3] of a take-off or landing move: a horizontal jerk j turns the thrust
@@ -65,13 +76,15 @@ class Mission:
         take-off's heading turn
     tolerance : distance [m] to the start point within which take-off is done
     touchdown_depth : how far below the ground the landing aims [m]
+    creep_speed : how fast the landing reference goes on down after that [m/s]
     spool_s : time on the ground at the start of take-off [s]
     """
 
     def __init__(self, trajectory: Trajectory, duration_s: float, climb_speed: float = 0.5,
                  land_speed: float = 0.3, tolerance: float = 0.1,
                  touchdown_depth: float = 0.1, spool_s: float = 0.0, *, accel: float = 0.5,
-                 max_yaw_rate: float = math.radians(90.0), yaw_accel: float = 1.0) -> None:
+                 max_yaw_rate: float = math.radians(90.0), yaw_accel: float = 1.0,
+                 creep_speed: float = 0.15) -> None:
         self._trajectory = trajectory
         self.duration_s = duration_s
         self._climb = climb_speed
@@ -81,6 +94,7 @@ class Mission:
         self._yaw_accel = yaw_accel
         self._tol = tolerance
         self._depth = touchdown_depth
+        self._creep = creep_speed
         self._spool = spool_s
         self._state = State.PREFLIGHT
         self._ground = np.zeros(3)
@@ -151,6 +165,20 @@ class Mission:
         turn = min_jerk_duration(target - yaw, self._yaw_rate, self._yaw_accel)
         self._turn = MinJerkSegment(climb.end_time, np.array([yaw]), np.array([target]), turn)
 
+    def _creep_below(self, dt: float, end: FloatArray
+                     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The landing's creep ``dt`` [s] after its descent ended at ``end``: straight down,
+        its speed eased from 0 to ``creep_speed`` over :data:`CREEP_RAMP_S`."""
+        r, c = CREEP_RAMP_S, self._creep
+        if dt < r:
+            s, ds, dds, _ = smoothstep(dt / r)
+            depth, speed, accel, jerk = c * r * smoothstep_integral(dt / r), c * s, c * ds / r, \
+                c * dds / (r * r)
+        else:
+            depth, speed, accel, jerk = c * (dt - 0.5 * r), c, 0.0, 0.0
+        down = np.array([0.0, 0.0, 1.0])
+        return end + depth * down, speed * down, accel * down, jerk * down
+
     def takeoff_done(self, t: float, position: FloatArray) -> bool:
         """True when the take-off moves are complete and the vehicle is at the start."""
         if self._state is not State.TAKEOFF or not self._path:
@@ -191,6 +219,8 @@ class Mission:
             # before the first segment starts, at() clamps to its start: the ground
             seg = next((s for s in self._path if t < s.end_time), self._path[-1])
             p, v, a, j = seg.at(t)
+            if state is State.LAND and t > seg.end_time:
+                p, v, a, j = self._creep_below(t - seg.end_time, p)
             yaw, yaw_rate = self._heading, 0.0
             if self._turn is not None:
                 y, dy, _, _ = self._turn.at(t)

@@ -11,13 +11,25 @@ States and transitions::
     LAND --on the floor--> DISARM (thrust to idle, 0.5 s) --> DONE (hand back)
 
     airborne (TAKEOFF, TRACK, HOLD, LAND):
+      the estimate, the newest Vicon pose or a Vicon sighting outside the volume
+                                               -> HANDBACK at once (on_geofence: handback,
+                                                  the default) or LAND; an error-level alarm
+      a second Vicon pose stream for the object -> LAND (on_second_stream: land) or HOLD
+                                                  until it stops
+      Vicon poses overruled the estimate (it was wrong and was re-anchored on them)
+                                               -> LAND
+      the reference asks more than the feasibility check allowed -> LAND
       Vicon silent > vicon_loss_hold_s         -> HOLD (hold position on the IMU estimate)
       HOLD and Vicon back                      -> the state HOLD interrupted
       HOLD and Vicon silent > vicon_loss_land_s -> LAND
-      outside the volume or tilt > max         -> LAND
+      tilt > max                               -> LAND
       battery below battery_land_v for battery_grace_s -> LAND
       TAKEOFF not done after takeoff_timeout_s -> LAND
       LAND and tilt > handback tilt            -> HANDBACK (the landing lost the attitude)
+      LAND: on the floor only with evidence (the estimate at the floor while Vicon is
+      fused, or the accelerometer's floor contact near it) -> DISARM; the estimate at
+      the floor on dead reckoning alone for landing_confirm_s -> HANDBACK (the pilot
+      takes the vehicle with the thrust it had: never thrust 0 in the air)
     any state:
       estimator diverged                       -> HANDBACK (mask 0 at once)
       no DATA for link_loss_s (after PREFLIGHT) -> LINK_LOST (log and stop)
@@ -41,6 +53,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import structlog
@@ -122,6 +135,18 @@ class SupervisorLimits:
     """Land when the reported battery voltage stays below this [V] (None: no check) ..."""
     battery_grace_s: float = 10.0
     """... for this long [s]; below it at preflight refuses the take-off."""
+    on_geofence: str = "handback"
+    """What leaving the volume does: "handback" (at once) or "land"."""
+    on_second_stream: str = "land"
+    """What a second Vicon pose stream for the object does: "land" or "hold"."""
+    landing_confirm_s: float = 5.0
+    """A landing whose estimate sits at the floor without evidence for this long (after
+    ``landed_time_s``) hands back [s]."""
+    contact_height_m: float = 0.5
+    """Floor contact counts only below this estimated height [m] (what dead reckoning may
+    drift during a landing without Vicon), and with Vicon fused only below
+    ``landed_height_m`` plus 0.15 m: a thrust fault that lifts a vehicle commanded to
+    descend reads like contact, anywhere."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,6 +177,16 @@ class Observation:
     battery_v : battery voltage the X-3D reports [V] (NaN: no STATUS block)
     land_request : why to land now ("" for no): a client asked, or the commanded flight
         was idle too long (:mod:`groundstation.loop.commander`); a nominal landing
+    vicon_position : NED [m] of the newest pose the pose filter passed, if it is at most
+        ``vicon_loss_hold_s`` old (None otherwise): the truth the geofence checks besides
+        the estimate, which may be wrong
+    vicon_outside : NED [m] of a confirmed Vicon sighting beyond the plausible volume, newer
+        than any pose passed (the vehicle left the volume; None if not)
+    vicon_rivals : confirmed pose streams of the object besides the one followed, now
+    overruled : why the estimate was re-anchored on Vicon poses it could not explain this
+        tick ("" if it was not): the estimate was wrong
+    reference_fault : why the reference is beyond what the feasibility check allowed ("")
+    vicon_diagnosis : what the pose filter saw, for a preflight failure (called only then)
     """
 
     t: float
@@ -174,6 +209,12 @@ class Observation:
     specific_force_g: float = 1.0
     battery_v: float = math.nan
     land_request: str = ""
+    vicon_position: tuple[float, float, float] | None = None
+    vicon_outside: tuple[float, float, float] | None = None
+    vicon_rivals: int = 0
+    overruled: str = ""
+    reference_fault: str = ""
+    vicon_diagnosis: Callable[[], str] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -221,6 +262,8 @@ class Supervisor:
     _t_state: float = 0.0
     _held: State = State.TRACK
     _landed_since: float | None = None
+    _unconfirmed_since: float | None = None
+    _hold_for_rival = False
     _not_applying_since: float | None = None
     _applied: bool = False
     _battery_low_since: float | None = None
@@ -269,6 +312,8 @@ class Supervisor:
         self._t_state = t
         level = "warning" if failsafe or new in (State.HOLD, State.HANDBACK, State.PILOT,
                                                  State.LINK_LOST, State.ABORTED) else "info"
+        if failsafe and reason.startswith(GEOFENCE):
+            level = "error"  # the loud alarm: the vehicle is beyond where it was trusted
         getattr(log, level)("supervisor", old=old.name, new=new.name, reason=reason, t=round(t, 3),
                             failsafe=failsafe)
         return new
@@ -361,26 +406,58 @@ class Supervisor:
             self._battery_low_since = None
 
     def _airborne_failsafe(self, obs: Observation) -> tuple[State, str] | None:
+        """The failsafes of every airborne state, most urgent first (LAND takes only the
+        ones that would hand back, see :meth:`_land`)."""
         lim = self.limits
-        x, y, z = obs.position
-        outside = not (lim.volume_x[0] <= x <= lim.volume_x[1]
-                       and lim.volume_y[0] <= y <= lim.volume_y[1]
-                       and lim.volume_z[0] <= z <= lim.volume_z[1])
-        if outside and self.state is not State.LAND:
-            return State.LAND, f"left the volume at ({x:.2f}, {y:.2f}, {z:.2f})"
-        if obs.tilt_rad > lim.max_tilt_rad and self.state is not State.LAND:
+        fence = self._geofence(obs)
+        if fence is not None and (lim.on_geofence == "handback" or self.state is not State.LAND):
+            return (State.HANDBACK if lim.on_geofence == "handback" else State.LAND), fence
+        if self.state is State.LAND:
+            return None
+        if obs.overruled:
+            return State.LAND, f"estimate was wrong: {obs.overruled}"
+        if obs.reference_fault:
+            return State.LAND, f"reference fault: {obs.reference_fault}"
+        if obs.vicon_rivals > 0:
+            what = (f"a second Vicon pose stream for the object ({obs.vicon_rivals} besides "
+                    "the one followed)")
+            if lim.on_second_stream == "land":
+                return State.LAND, what
+            if self.state is not State.HOLD:
+                self._held, self._hold_for_rival = self.state, True
+                return State.HOLD, f"{what}: holding"
+        if obs.tilt_rad > lim.max_tilt_rad:
             return State.LAND, f"tilt {math.degrees(obs.tilt_rad):.0f} deg over the limit"
         low = self._battery_low_since
-        if low is not None and obs.t - low >= lim.battery_grace_s and \
-                self.state is not State.LAND:
+        if low is not None and obs.t - low >= lim.battery_grace_s:
             return State.LAND, (f"battery {obs.battery_v:.2f} V below {lim.battery_land_v:.2f} V "
                                 f"for {obs.t - low:.1f} s")
-        if obs.vicon_age_s > lim.vicon_loss_land_s and self.state is not State.LAND:
+        if obs.vicon_age_s > lim.vicon_loss_land_s:
             return State.LAND, f"Vicon lost for {obs.vicon_age_s:.2f} s"
         if obs.vicon_age_s > lim.vicon_loss_hold_s and self.state in (State.TAKEOFF, State.TRACK):
-            self._held = self.state
+            self._held, self._hold_for_rival = self.state, False
             return State.HOLD, f"Vicon lost for {obs.vicon_age_s:.2f} s: holding on IMU"
         return None
+
+    def _geofence(self, obs: Observation) -> str | None:
+        """Why the vehicle is outside the volume (None if it is not): the estimate there, or
+        the truth there (the newest Vicon pose, or a Vicon sighting beyond the plausible
+        volume) whatever the estimate says: an estimate can be wrong. The floor is no
+        fence: nothing flies through it, so a point below it is an estimate (or a Vicon
+        origin) that is off, which the other failsafes and the landing handle."""
+        if obs.vicon_outside is not None and not self._inside(obs.vicon_outside, floor=False):
+            return f"{GEOFENCE}: Vicon sees the vehicle at {_point(obs.vicon_outside)}"
+        for what, where in (("Vicon", obs.vicon_position), ("estimate", obs.position)):
+            if where is not None and not self._inside(where, floor=False):
+                return f"{GEOFENCE} at {_point(where)} ({what})"
+        return None
+
+    def _inside(self, point: tuple[float, float, float], *, floor: bool = True) -> bool:
+        """``point`` (NED [m]) is inside the volume; with ``floor=False`` below it counts too."""
+        lim = self.limits
+        x, y, z = point
+        return (lim.volume_x[0] <= x <= lim.volume_x[1] and lim.volume_y[0] <= y <= lim.volume_y[1]
+                and lim.volume_z[0] <= z and (z <= lim.volume_z[1] or not floor))
 
     # ------------------------------------------------------------------ per state
     def _preflight(self, obs: Observation) -> State:
@@ -391,18 +468,26 @@ class Supervisor:
         elif obs.data_rate_hz < lim.min_data_rate_hz:
             failures.append(f"DATA at {obs.data_rate_hz:.0f} Hz < {lim.min_data_rate_hz:.0f} Hz")
         if obs.vicon_rate_hz < lim.min_vicon_rate_hz or obs.vicon_age_s > lim.vicon_loss_hold_s:
-            failures.append(f"Vicon at {obs.vicon_rate_hz:.0f} Hz")
+            failures.append(f"Vicon at {obs.vicon_rate_hz:.0f} Hz (at least "
+                            f"{lim.min_vicon_rate_hz:.0f} needed)")
         if not obs.estimator_ok:
             failures.append("estimator not converged")
         if not obs.gravity_ok:
             failures.append("accelerometer gravity disagrees with the Vicon attitude "
                             "(check vicon.world_to_ned / body_to_object)")
+        if not self._inside(obs.position):
+            failures.append(f"the vehicle is at {_point(obs.position)}, outside the volume "
+                            "(safety.volume_x/y/z)")
+        if obs.vicon_rivals > 0:
+            failures.append("a second Vicon pose stream for the object")
         if lim.battery_land_v is not None and obs.battery_v < lim.battery_land_v:
             failures.append(f"battery {obs.battery_v:.2f} V < {lim.battery_land_v:.2f} V")
         self.preflight_failures = failures
         if not failures:
             return self._go(obs.t, State.TAKEOFF, "preflight checks passed", nominal=True)
         if obs.t - self._t_state > lim.preflight_timeout_s:
+            if obs.vicon_diagnosis is not None and any(f.startswith("Vicon") for f in failures):
+                failures.append(f"Vicon: {obs.vicon_diagnosis()}")
             return self._go(obs.t, State.ABORTED, "preflight failed: " + "; ".join(failures))
         return self.state
 
@@ -436,31 +521,53 @@ class Supervisor:
         failsafe = self._airborne_failsafe(obs)
         if failsafe is not None:
             return self._go(obs.t, *failsafe, failsafe=True)
-        if obs.vicon_age_s <= self.limits.vicon_loss_hold_s:
+        lim = self.limits
+        if self._hold_for_rival:
+            if obs.vicon_rivals == 0 and obs.vicon_age_s <= lim.vicon_loss_hold_s:
+                return self._go(obs.t, self._held, "the second Vicon stream stopped")
+            if obs.t - self._t_state > lim.vicon_loss_land_s:
+                return self._go(obs.t, State.LAND, "a second Vicon pose stream for the object "
+                                f"for {obs.t - self._t_state:.1f} s", failsafe=True)
+            return self.state
+        if obs.vicon_age_s <= lim.vicon_loss_hold_s:
             return self._go(obs.t, self._held, "Vicon back")
         return self.state
 
     def _land(self, obs: Observation) -> State:
-        if obs.tilt_rad > self.limits.handback_tilt_rad:
+        lim = self.limits
+        if obs.tilt_rad > lim.handback_tilt_rad:
             return self._go(obs.t, State.HANDBACK, f"landing failed: tilt "
                             f"{math.degrees(obs.tilt_rad):.0f} deg, the pilot takes over",
                             failsafe=True)
         failsafe = self._airborne_failsafe(obs)
         if failsafe is not None:
             return self._go(obs.t, *failsafe, failsafe=True)
-        lim = self.limits
+        height = obs.height_above_ground_m
+        fixed = obs.vicon_age_s <= lim.vicon_loss_hold_s  # the estimate is Vicon's
         contact = (obs.lift_fraction < lim.contact_lift_fraction
-                   and abs(obs.specific_force_g - 1.0) < lim.contact_accel_tolerance)
-        if obs.height_above_ground_m < lim.landed_height_m or contact:
+                   and abs(obs.specific_force_g - 1.0) < lim.contact_accel_tolerance
+                   and height < (lim.landed_height_m + 0.15 if fixed else lim.contact_height_m))
+        low = height < lim.landed_height_m
+        if (low and fixed) or contact:
+            self._unconfirmed_since = None
             if self._landed_since is None:
                 self._landed_since = obs.t
-            elif obs.t - self._landed_since >= self.limits.landed_time_s:
-                if obs.height_above_ground_m < self.limits.landed_height_m:
+            elif obs.t - self._landed_since >= lim.landed_time_s:
+                if low and fixed:
                     return self._go(obs.t, State.DISARM, "on the floor", nominal=True)
                 return self._go(obs.t, State.DISARM, "on the floor: ground contact felt at "
-                                f"estimated height {obs.height_above_ground_m:.2f} m", nominal=True)
-        else:
-            self._landed_since = None
+                                f"estimated height {height:.2f} m", nominal=True)
+            return self.state
+        self._landed_since = None
+        if not low:
+            self._unconfirmed_since = None
+        elif self._unconfirmed_since is None:
+            self._unconfirmed_since = obs.t
+        elif obs.t - self._unconfirmed_since >= lim.landed_time_s + lim.landing_confirm_s:
+            return self._go(obs.t, State.HANDBACK, "landing not confirmed: the estimate reached "
+                            f"the floor on the IMU alone (no Vicon for {obs.vicon_age_s:.1f} s) "
+                            "and no floor contact was felt; handed back with the thrust it had",
+                            failsafe=True)
         return self.state
 
     def _disarm(self, obs: Observation) -> State:
@@ -468,6 +575,14 @@ class Supervisor:
             return self._go(obs.t, State.DONE, "landed and disarmed: vehicle handed back",
                             nominal=True)
         return self.state
+
+
+GEOFENCE = "left the volume"
+"""How every geofence reason starts (the supervisor logs those as errors)."""
+
+
+def _point(p: tuple[float, float, float]) -> str:
+    return f"({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f})"
 
 
 _HANDLERS = {

@@ -1,0 +1,111 @@
+"""The safety chain judged by the truth: faults in the plant and the reference, not in the
+estimate, and what the vehicle really did.
+
+A thrust fault (the rotors give more lift than commanded for 0.3 s: an ESC glitch) pushes
+the vehicle up faster than the accelerometer can measure (it saturates at 14 m/s^2,
+Ch. 6.2), so the dead-reckoned estimate stays near 1 m while the vehicle climbs. Before,
+every layer trusted the estimate: the true poses were refused, read as a lost Vicon,
+the landing was flown on dead reckoning and the motors idled 14 m up. Now the poses that
+agree with each other overrule the estimate, the geofence acts on the truth, and the
+motors are idled only on evidence of the floor.
+
+In-process on the simulated clock, the Vicon stream tracked well beyond the flight volume
+(as a lab's cameras see beyond the volume the ground station is allowed to fly in).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from lab_helpers import sim_config
+
+from groundstation.config import GroundStationConfig
+from groundstation.control.trajectory import FigureEight
+from groundstation.loop.inprocess import FlightResult, InProcessFlight, fly_in_process
+from groundstation.loop.supervisor import State
+from groundstation.types import Reference
+
+TRACKED_FAR = {"sim.vicon.volume_x": [-20.0, 20.0], "sim.vicon.volume_y": [-20.0, 20.0],
+               "sim.vicon.volume_z": [-20.0, 0.05]}
+"""The virtual Vicon tracks the vehicle 20 m around (the flight volume is +-1.5 m, 2 m up)."""
+
+COMMANDED = 0xF
+
+
+def excursion(cfg: GroundStationConfig, result: FlightResult) -> float:
+    """How far the truth got outside the flight volume while the ground station still
+    commanded the vehicle (ctrl mask 0xF) [m]; 0 if it never did."""
+    s = cfg.safety
+    lo = np.array([s.volume_x[0], s.volume_y[0], s.volume_z[0]])
+    hi = np.array([s.volume_x[1], s.volume_y[1], s.volume_z[1]])
+    pos = result.trace["true_pos"][result.trace["mask"] == COMMANDED]
+    outside = np.maximum(lo - pos, 0.0) + np.maximum(pos - hi, 0.0)
+    return float(np.linalg.norm(outside, axis=1).max(initial=0.0))
+
+
+def disarmed_height(result: FlightResult) -> float:
+    """The truth's greatest height while the motors were idled to disarm [m] (0 if never)."""
+    return float((-result.trace["true_pos"][:, 2])[result.during(State.DISARM)].max(initial=0.0))
+
+
+@pytest.mark.parametrize(("lift_scale", "vicon_hz"), [(2.0, 100.0), (2.0, 10.0), (1.6, 10.0),
+                                                      (1.3, 100.0)])
+def test_a_thrust_fault_that_blinds_the_estimate_is_caught_by_the_truth(
+        lift_scale: float, vicon_hz: float) -> None:
+    cfg = sim_config(**{"trajectory.name": "hover", "sim.vicon.rate_hz": vicon_hz,
+                        **TRACKED_FAR})
+    result = fly_in_process(cfg, duration_s=20.0, max_time_s=60.0, events=[
+        (12.0, lambda f: f.lab.thrust_fault(lift_scale, 0.3 if lift_scale > 1.5 else 1.0))])
+    reasons = [tr.reason for tr in result.transitions if tr.failsafe]
+    assert not result.success and reasons, result.transitions
+    # the first failsafe is the estimate overruled by Vicon, or the geofence on the truth
+    assert reasons[0].startswith(("estimate was wrong", "left the volume")), reasons
+    margin = cfg.vicon.plausibility_margin_m
+    assert excursion(cfg, result) < margin, excursion(cfg, result)
+    assert disarmed_height(result) < 0.1
+    if result.final_state is not State.HANDBACK:  # landed: on the floor, by the truth
+        assert result.final_state is State.DONE
+        assert -result.trace["true_pos"][-1, 2] < 0.02
+
+
+class ArmedGlitch:
+    """The figure-eight that flies, until :attr:`armed`: from then on every reference asks
+    the acceleration and jerk min-jerk shaping of dense samples asked between its knots
+    (69 m/s^2, 84,500 m/s^3). The feasibility check before flight sees the good one."""
+
+    def __init__(self) -> None:
+        self._base = FigureEight([0.0, 0.0, -1.0], width_m=1.0, period_s=20.0)
+        self.name, self.duration, self.periodic = "glitch", 20.0, True
+        self.free_heading = True
+        self.armed = False
+
+    def sample(self, t: float) -> Reference:
+        ref = self._base.sample(t)
+        if not self.armed:
+            return ref
+        wild = np.array([0.0, 69.0, 0.0]) * math.copysign(1.0, math.sin(300.0 * t))
+        return Reference(t=ref.t, position=ref.position, velocity=ref.velocity,
+                         acceleration=wild, jerk=np.array([0.0, 84_500.0, 0.0]), yaw=ref.yaw)
+
+
+def test_a_reference_beyond_what_the_check_allowed_is_a_fault_not_an_input() -> None:
+    cfg = sim_config(**{"trajectory.name": "figure-eight"})
+    glitch = ArmedGlitch()
+    flight = InProcessFlight(cfg, trajectory=glitch, duration_s=20.0)
+
+    def arm(_: InProcessFlight) -> None:
+        glitch.armed = True
+
+    result = flight.run(max_time_s=60.0, events=[(12.0, arm)])
+    land = next(tr for tr in result.transitions if tr.new is State.LAND)
+    assert land.failsafe and land.reason.startswith("reference fault"), land.reason
+    assert "m/s^2" in land.reason or "m/s^3" in land.reason
+    assert land.t - 12.0 < 0.05  # the next tick or two
+    assert result.final_state is State.DONE and not result.success
+    # the wild feed-forward never reached the vehicle: it stayed level and near its path
+    tilt = [2.0 * math.degrees(math.asin(min(1.0, float(np.linalg.norm(q[1:3])))))
+            for q in result.trace["true_q"]]
+    assert max(tilt) < 15.0
+    assert disarmed_height(result) < 0.1
