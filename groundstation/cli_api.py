@@ -78,6 +78,13 @@ def goto(
 
     Example: `gs goto 0.5 0 -1 --yaw 90 --wait`.
     """
+    for name, value in (("X", x), ("Y", y), ("Z", z), ("--yaw", yaw), ("--duration", duration)):
+        if value is not None and not math.isfinite(value):
+            raise _fail(f"{name} {value}: must be a finite number", 2)
+    if yaw is not None and not abs(yaw) <= 360.0:
+        raise _fail(f"--yaw {yaw:g}: a heading within one turn, [-360, 360] degrees", 2)
+    if duration is not None and not duration > 0.0:
+        raise _fail(f"--duration {duration:g}: a positive number of seconds", 2)
     client = _client(endpoint, timeout, server_key, client_key)
     try:
         motion = client.go_to([x, y, z], None if yaw is None else math.radians(yaw), duration,

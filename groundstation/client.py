@@ -47,6 +47,10 @@ DEFAULT_TELEMETRY = "tcp://127.0.0.1:5556"
 """The daemon's default ``telemetry.endpoint``."""
 POLL_S = 0.05
 """How often the blocking helpers ask for the status [s]."""
+PLAN_WAIT_S = 10.0
+"""How much longer than ``timeout_s`` a motion request waits for its reply [s]: the
+daemon answers once the motion is planned, within its ``api.plan_timeout_s`` (5 s by
+default), and refuses it otherwise."""
 FAILSAFE_STATES = frozenset({"HOLD", "HANDBACK", "LINK_LOST", "ABORTED"})
 """States a failsafe puts the flight in (a landing may be one too: see ``reason``)."""
 ENDED_STATES = frozenset({"DONE", "HANDBACK", "LINK_LOST", "ABORTED"})
@@ -75,7 +79,9 @@ class Refused(ClientError):  # noqa: N818 (a refusal, not a fault of the client)
 
 
 class BadRequest(Refused):
-    """Malformed: a position that is not 3 finite numbers, an unknown field or request."""
+    """Malformed or absurd: a position that is not 3 finite numbers, a heading beyond one
+    turn, a duration outside [0.2, 600] s, a ``start_at`` beyond the daemon's
+    ``api.start_horizon_s``, an unknown field or request."""
 
     kind = "request"
 
@@ -88,21 +94,31 @@ class NotNow(Refused):
 
 
 class OutsideVolume(Refused):
-    """A point of the motion outside the flight volume less its margin."""
+    """A point of the motion outside the flight volume: beyond its sides or ceiling less
+    the margin, or below the floor (which has no margin)."""
 
     kind = "volume"
 
 
 class Infeasible(Refused):
-    """Beyond the vehicle's or the configured limits: speed, tilt, turn rate, lift."""
+    """Beyond the vehicle's or the configured limits: speed, tilt, turn rate, lift; a motion
+    longer than 600 s; a plan not made within the daemon's ``api.plan_timeout_s``."""
 
     kind = "infeasible"
 
 
 class Busy(Refused):
-    """The flight kept changing its plan while this motion was planned: try again."""
+    """The flight kept changing its plan while this motion was planned, or the daemon's
+    planner was starting: try again."""
 
     kind = "busy"
+
+
+class InternalError(Refused):
+    """The daemon failed to answer the request (a fault of the ground station, in its log);
+    the flight goes on."""
+
+    kind = "internal"
 
 
 class Preempted(ClientError):  # noqa: N818
@@ -119,7 +135,8 @@ class WaitTimeout(ClientError, TimeoutError):  # noqa: N818
 
 
 _REFUSALS: dict[str, type[Refused]] = {
-    cls.kind: cls for cls in (BadRequest, NotNow, OutsideVolume, Infeasible, Busy)}
+    cls.kind: cls for cls in (BadRequest, NotNow, OutsideVolume, Infeasible, Busy,
+                              InternalError)}
 
 
 # --------------------------------------------------------------------------- replies
@@ -234,16 +251,19 @@ class Client:
 
     endpoint : its ``telemetry.control_endpoint``; telemetry : its ``telemetry.endpoint``
     (for :meth:`subscribe` and :meth:`transitions`); timeout_s : how long a request waits
-    for its reply [s]; server_key, client_key : the daemon's public key file and this
-    client's ``.key_secret`` file when it authenticates clients (CURVE).
+    for its reply [s]; plan_wait_s : how much longer a motion request waits (the daemon
+    plans it first; see :data:`PLAN_WAIT_S`); server_key, client_key : the daemon's public
+    key file and this client's ``.key_secret`` file when it authenticates clients (CURVE).
     """
 
     def __init__(self, endpoint: str = DEFAULT_CONTROL, *, telemetry: str = DEFAULT_TELEMETRY,
-                 timeout_s: float = 3.0, server_key: str | Path | None = None,
+                 timeout_s: float = 3.0, plan_wait_s: float = PLAN_WAIT_S,
+                 server_key: str | Path | None = None,
                  client_key: str | Path | None = None) -> None:
         self.endpoint = endpoint
         self.telemetry = telemetry
         self.timeout_s = timeout_s
+        self.plan_wait_s = plan_wait_s
         self._curve: CurveClient | None = None
         if (server_key is None) != (client_key is None):
             raise ClientError("server_key and client_key go together (CURVE needs both)")
@@ -251,11 +271,14 @@ class Client:
             self._curve = load_client_keys(client_key, server_key)
 
     # ------------------------------------------------------------------ requests
-    def request(self, request: Mapping[str, Any]) -> dict[str, Any]:
-        """Send one request and return the reply; raises the :class:`Refused` subclass of
-        its ``kind``, or DaemonUnreachableError."""
+    def request(self, request: Mapping[str, Any], timeout_s: float | None = None
+                ) -> dict[str, Any]:
+        """Send one request and return the reply (waiting ``timeout_s`` [s], default the
+        client's); raises the :class:`Refused` subclass of its ``kind``, or
+        DaemonUnreachableError."""
+        wait = self.timeout_s if timeout_s is None else timeout_s
         try:
-            reply = send_request(self.endpoint, dict(request), self.timeout_s, curve=self._curve)
+            reply = send_request(self.endpoint, dict(request), wait, curve=self._curve)
         except GroundStationError as exc:
             raise DaemonUnreachableError(str(exc)) from exc
         if not reply.get("ok"):
@@ -427,7 +450,8 @@ class Client:
             last = name
 
     def _motion(self, request: Mapping[str, Any]) -> Motion:
-        return Motion.from_reply(self.request(request)["motion"])
+        reply = self.request(request, self.timeout_s + self.plan_wait_s)
+        return Motion.from_reply(reply["motion"])
 
     def _maybe_wait(self, motion: Motion, wait: bool, timeout: float | None) -> Motion:
         if not wait:

@@ -68,3 +68,17 @@ def test_api_commands_refuse_bad_usage() -> None:
     assert RUNNER.invoke(app, ["goto", "0.5", "0"]).exit_code == 2  # z is missing
     bad = RUNNER.invoke(app, ["status", "--timeout", "-1"])
     assert bad.exit_code == 2 and "positive number of seconds" in bad.output
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["goto", "0", "0", "-1", "--yaw", "1e15"], "--yaw 1e+15: a heading within one turn"),
+    (["goto", "0", "0", "-1", "--yaw", "nan"], "--yaw nan: must be a finite number"),
+    (["goto", "inf", "0", "-1"], "X inf: must be a finite number"),
+    (["goto", "0", "0", "-1", "--duration", "0"], "--duration 0: a positive number"),
+])
+def test_goto_refuses_numbers_no_daemon_would_take_as_usage_errors(args: list[str],
+                                                                   words: str) -> None:
+    """Checked before anything is sent (no daemon runs at the endpoint: it is never asked)."""
+    result = RUNNER.invoke(app, [*args, "--endpoint", "tcp://127.0.0.1:9", "--timeout", "0.3"])
+    assert result.exit_code == 2, result.output
+    assert words in result.output and "no reply" not in result.output

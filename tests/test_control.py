@@ -73,7 +73,7 @@ def test_malformed_requests_get_an_error_reply_and_are_counted(raw: bytes) -> No
         finally:
             req.close(linger=0)
             ctx.term()
-    assert isinstance(reply, dict) and reply["ok"] is False
+    assert isinstance(reply, dict) and reply["ok"] is False and reply["kind"] == "request"
     assert reply["error"].startswith("malformed request")
     assert server.bad_requests == 1
 
@@ -87,7 +87,8 @@ def test_a_failing_handler_is_answered_not_raised() -> None:
         thread = _serve_until(server, 1, broken)
         reply = send_request(server.endpoint, {"request": "channels"})
         thread.join(5.0)
-    assert reply == {"ok": False, "error": "request failed: bug"}
+    # every error reply has a kind: a handler's failure is ours ("internal"), not the client's
+    assert reply == {"ok": False, "error": "internal error: RuntimeError: bug", "kind": "internal"}
     assert server.bad_requests == 1
 
 
@@ -199,6 +200,7 @@ def test_bad_requests_get_an_error_reply_and_the_server_keeps_serving(
         assert server.endpoint is not None
         reply = _raw(server.endpoint, frames)
         assert reply is not None and reply["ok"] is False and error in reply["error"], reply
+        assert reply["kind"] == "request"
         assert len(reply["error"]) <= 300  # the reply does not echo a large request back
         assert _served(server.endpoint)
     assert (server.answered, server.bad_requests) == (2, 1)
@@ -344,7 +346,7 @@ def test_the_daemon_handler_behind_a_real_socket_survives_hostile_clients() -> N
         for frames in ([b"{}", b"{}"], [b"\xff"], [b"[" * 4000], [b'{"request": 7}'],
                        [b'{"request": "channels", "auto": [[], {}]}']):
             reply = _raw(server.endpoint, frames)
-            assert reply is not None and reply["ok"] is False
+            assert reply is not None and reply["ok"] is False and reply["kind"] == "request"
         assert _raw(server.endpoint, [b"x" * (MAX_REQUEST_BYTES + 1)], timeout_s=0.3) is None
         reply = send_request(server.endpoint, {"request": "channels", "auto": ["thrust"]})
     assert reply == {"ok": True, "auto": ["thrust"], "state": "PREFLIGHT"}

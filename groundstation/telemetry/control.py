@@ -11,7 +11,11 @@ Wire format, one JSON object per message (UTF-8, one frame, at most
   channels under ground-station control (bumpless, see
   :mod:`groundstation.asctec.channels`); without ``"auto"`` it only reports;
 * reply ``{"ok": true, "auto": [...], "state": "TRACK"}`` or
-  ``{"ok": false, "error": "why"}``.
+  ``{"ok": false, "error": "why", "kind": kind}``. Every error reply has a ``kind``:
+  ``request`` for one that is not one frame of UTF-8 JSON holding an object (and the
+  handler's refusals of malformed requests), ``internal`` when the handler failed (a
+  fault of ours, logged), or the handler's own (:mod:`groundstation.loop.api`: state,
+  volume, infeasible, busy).
 
 Nothing a client sends may crash, stall or wedge the flight loop (issue 14):
 
@@ -234,11 +238,11 @@ class ControlServer(ZmqOwner):
         except Exception as exc:  # a handler bug must not stop the flight
             self._stats.failed += 1
             log.exception("control request failed")
-            return _error_reply(f"request failed: {exc}")
+            return _error_reply(f"internal error: {type(exc).__name__}: {exc}", "internal")
 
     def _malformed(self, why: str) -> bytes:
         self._stats.malformed += 1
-        return _error_reply(f"malformed request: {why}")
+        return _error_reply(f"malformed request: {why}", "request")
 
     def _socket_failed(self, exc: Exception) -> None:
         """Close the failed socket (whatever it owed is lost) and bind its endpoint again."""
@@ -304,10 +308,10 @@ class ControlServer(ZmqOwner):
         super()._close_context()
 
 
-def _error_reply(error: str) -> bytes:
+def _error_reply(error: str, kind: str) -> bytes:
     if len(error) > _ERROR_CHARS:
         error = error[:_ERROR_CHARS - 3] + "..."
-    return json.dumps({"ok": False, "error": error}).encode()
+    return json.dumps({"ok": False, "error": error, "kind": kind}).encode()
 
 
 def send_request(endpoint: str, request: Request, timeout_s: float = 2.0, *,
