@@ -72,3 +72,58 @@ def test_a_failsafe_preempts_a_motion_and_refuses_new_ones_until_it_clears() -> 
         State.DONE]
     land = result.transitions[4]
     assert land.reason == "land requested by a client" and land.nominal and not land.failsafe
+
+
+FIGURE8_3000 = {"name": "figure-eight", "period_s": 3000, "center": [0.0, 0.0, -1.0],
+                "size_m": 0.2}
+"""The hostile tester's legal request: a figure-eight with a 3000 s lap."""
+
+
+def test_the_hostile_requests_are_refused_and_the_legal_one_flown_safely() -> None:
+    """The hostile tester's requests, in TRACK on the simulated clock: each absurd number
+    refused as a request, the 3000 s lap refused as longer than a motion may be, a target
+    below the floor refused; none of them changes the plan. The same figure-eight flown for
+    20 s is accepted and flown: the truth stays level and on the figure-eight."""
+    cfg = sim_config(**{"trajectory.name": "none"})
+    flight = InProcessFlight(cfg)
+    api = MotionApi(flight.core, cfg, clock=lambda: flight.lab.t,
+                    wall_clock=lambda: 1.7e9 + flight.lab.t)
+    replies: dict[str, dict[str, Any]] = {}
+
+    def ask(name: str, request: dict[str, Any]) -> Any:
+        def event(f: InProcessFlight) -> None:
+            replies[name] = api.handle(request)
+        return event
+
+    here = [0.0, 0.0, -1.0]
+    hostile = {
+        "lap": {"request": "follow", "trajectory": FIGURE8_3000},
+        "fast": {"request": "follow", "trajectory": {**FIGURE8_3000, "period_s": 1e-9}},
+        "far": {"request": "follow", "trajectory": FIGURE8_3000, "start_at": 1e12},
+        "yaw": {"request": "go_to", "position": here, "yaw": 1e308},
+        "tiny": {"request": "go_to", "position": here, "duration": 1e-300},
+        "huge": {"request": "go_to", "position": here, "duration": int("9" * 4000)},
+        "floor": {"request": "go_to", "position": [0.0, 0.0, 0.1]},
+    }
+    events = [*[(9.0, ask(name, request)) for name, request in hostile.items()],
+              (9.5, ask("flown", {"request": "follow", "trajectory": FIGURE8_3000,
+                                  "duration": 20.0})),
+              (35.0, ask("land", {"request": "land"}))]
+    result = flight.run(max_time_s=80.0, events=events)
+
+    kinds = {name: (replies[name]["ok"], replies[name].get("kind")) for name in hostile}
+    assert kinds == {"lap": (False, "infeasible"), "fast": (False, "request"),
+                     "far": (False, "request"), "yaw": (False, "request"),
+                     "tiny": (False, "request"), "huge": (False, "request"),
+                     "floor": (False, "volume")}, replies
+    flown = replies["flown"]
+    assert flown["ok"], flown
+    commander = flight.core.commander
+    assert commander is not None and [m.kind for m in commander.motions] == ["follow"]
+    assert result.final_state is State.DONE and result.success, result.transitions
+    truth = flight.lab.truth_log.arrays()  # type: ignore[attr-defined]
+    air = (truth["t"] >= 9.0) & (truth["t"] <= 35.0)
+    q = truth["quaternion"][air]
+    tilt = np.degrees(np.arccos(np.clip(1.0 - 2.0 * (q[:, 1] ** 2 + q[:, 2] ** 2), -1, 1)))
+    offset = np.linalg.norm(truth["position"][air] - FIGURE8_3000["center"], axis=1)
+    assert tilt.max() < 10.0 and offset.max() < 0.15, (tilt.max(), offset.max())

@@ -2,9 +2,9 @@
 may ask of a flying daemon, and how each is checked and answered.
 
 Requests are JSON objects on the control socket (:mod:`groundstation.telemetry.control`);
-each reply is ``{"ok": true, ...}`` or ``{"ok": false, "error": why, "kind": kind}`` with
-the kinds of :class:`~groundstation.loop.commander.CommandRefusedError` (and ``busy``
-when the flight kept changing the plan while this one was planned). Frames as
+each reply is ``{"ok": true, ...}`` or ``{"ok": false, "error": why, "kind": kind}``, every
+refusal with one of the kinds of :class:`~groundstation.loop.commander.CommandRefusedError`:
+``request``, ``state``, ``volume``, ``infeasible``, ``busy``, ``internal``. Frames as
 everywhere: NED earth [m], headings [rad] from north, times [s].
 
 ==============  ===========================================================  ==========
@@ -28,16 +28,20 @@ a flight with a configured trajectory answers status, land and channels and refu
 motions. Motions are accepted only in TRACK: before take-off is complete, while a
 failsafe acts and after landing began they are refused with kind ``state``.
 
+Every number is checked at the boundary (:mod:`groundstation.loop.boundary`) before any
+arithmetic; every motion lasts at most :data:`~groundstation.loop.commander.MAX_MOTION_S`
+however its length arises, checked before it is sampled.
+
 Threads: :meth:`MotionApi.handle` runs where the request arrived (the control socket's
 thread in the daemon). Everything that reads or changes the flight goes through
 ``in_loop``, which runs a function in the flight loop between two ticks and returns its
-result; planning, the expensive part, runs outside the loop (see
-:mod:`groundstation.loop.commander`).
+result. Planning, the expensive part, goes to the ``planner``: in the daemon a process of
+its own (:mod:`groundstation.loop.planner_process`), which must answer within
+``api.plan_timeout_s``; the loop never waits for it.
 """
 
 from __future__ import annotations
 
-import math
 import queue
 import threading
 import time
@@ -47,30 +51,34 @@ from concurrent.futures import TimeoutError as FutureTimeout
 from functools import partial
 from typing import Any, ClassVar, Protocol, TypeVar
 
-import numpy as np
 import structlog
-from pydantic import ValidationError
 
 from groundstation.asctec.messages import CHANNELS
-from groundstation.config import GroundStationConfig, TrajectoryConfig, describe_problems
+from groundstation.config import GroundStationConfig
 from groundstation.control.base import heading_of
-from groundstation.control.trajectories import waypoints_from_rows
-from groundstation.control.trajectory import Trajectory
-from groundstation.errors import TrajectoryError
-from groundstation.loop.assemble import motion_limits_from_config, trajectory_for_flight
+from groundstation.loop import boundary
 from groundstation.loop.commander import (
-    MAX_MOTION_S,
     PLAN_LEAD_S,
     Commander,
     CommandRefusedError,
     Motion,
     PlanBase,
     Planned,
-    plan_follow,
-    plan_go_to,
-    plan_hold,
 )
 from groundstation.loop.core import FlightCore
+from groundstation.loop.planner import (
+    Follow,
+    Followable,
+    GoTo,
+    Hold,
+    InlinePlanner,
+    MotionSpec,
+    Planner,
+    PrepareFollow,
+    TakeOff,
+    plan_with,
+    settings_from_config,
+)
 from groundstation.loop.supervisor import State
 from groundstation.model.quaternion import rotate
 
@@ -87,10 +95,8 @@ class InLoop(Protocol):
 Reply = dict[str, Any]
 
 INSTALL_ATTEMPTS = 3
-"""Plans of one request (each with twice the lead of the last) before it is refused busy."""
-
-MAX_WAYPOINTS = 1000
-"""Most waypoints a ``follow`` request may carry."""
+"""Plans of one request (each with at least twice the lead of the last, and half as much
+again as the last attempt took) before it is refused busy."""
 
 
 IN_LOOP_TIMEOUT_S = 1.0
@@ -171,25 +177,34 @@ class MotionApi:
 
     in_loop : runs a function in the flight loop and returns its result (the daemon's
         queue to its loop; by default in the caller's thread, for a core nobody else steps)
+    planner : plans motions (the daemon's planner process; by default in the caller's
+        thread, :class:`~groundstation.loop.planner.InlinePlanner`)
     health : the daemon's input health for status replies (a JSON-able mapping)
     clock, wall_clock : monotonic and unix time [s]
     """
 
     def __init__(self, core: FlightCore, config: GroundStationConfig, *,
-                 in_loop: InLoop = _in_place,
+                 in_loop: InLoop = _in_place, planner: Planner | None = None,
                  health: Callable[[], Mapping[str, Any]] = dict,
                  clock: Callable[[], float] = time.monotonic,
                  wall_clock: Callable[[], float] = time.time) -> None:
         self.core = core
         self.config = config
         self._in_loop = in_loop
+        settings = settings_from_config(config)
+        self._planner: Planner = planner if planner is not None else InlinePlanner(settings)
+        self._volume = settings.limits.volume
+        self._max_yaw_rate = settings.limits.flight.max_yaw_rate_rad_s
+        self._min_step = 1.0 / config.serial.command_rate_hz
+        self._plan_timeout = config.api.plan_timeout_s
+        self._start_horizon = config.api.start_horizon_s
         self._health = health
         self._clock = clock
         self._wall = wall_clock
-        self._limits = motion_limits_from_config(config)
 
     def handle(self, request: Mapping[str, Any]) -> Reply:
-        """The reply to one request (never raises for a client's mistake)."""
+        """The reply to one request; never raises. A refusal has its kind; a failure of
+        ours is answered ``internal`` (and logged with its traceback)."""
         kind = request.get("request")
         handler = self._HANDLERS.get(kind) if isinstance(kind, str) else None
         if handler is None:
@@ -201,48 +216,60 @@ class MotionApi:
         except CommandRefusedError as exc:
             log.info("request refused", request=kind, kind=exc.kind, reason=exc.reason)
             return _refusal(exc)
+        except Exception as exc:  # a fault of ours: the client hears of it, the flight goes on
+            log.exception("request failed", request=kind)
+            return _refusal(CommandRefusedError(
+                "internal", f"internal error: {type(exc).__name__}: {exc}"))
 
     # ------------------------------------------------------------------ requests
     def _status(self, request: Mapping[str, Any]) -> Reply:
+        _only(request)
         return self._in_loop(self.status)
 
     def _go_to(self, request: Mapping[str, Any]) -> Reply:
         _only(request, "position", "yaw", "duration")
-        position = _vector(request.get("position"), "position")
-        yaw = _number(request.get("yaw"), "yaw", optional=True)
-        duration = _duration(request.get("duration"))
-        return self._motion(lambda base: plan_go_to(base, position, yaw, duration,
-                                                    self._limits))
+        position = boundary.position(request.get("position"), self._volume)
+        yaw = boundary.heading(request.get("yaw"))
+        duration = boundary.duration(request.get("duration"))
+        return self._motion(lambda base: GoTo(position, yaw, duration))
 
     def _takeoff(self, request: Mapping[str, Any]) -> Reply:
         _only(request, "height")
-        height = _number(request.get("height"), "height")
-        if not height > 0.0:
-            raise CommandRefusedError("request", f"height {height:g} m: must be above the floor")
-
-        def plan(base: PlanBase) -> Planned:
-            here = base.reference().position
-            target = np.array([here[0], here[1], base.ground[2] - height])
-            return plan_go_to(base, target, None, None, self._limits)
-        return self._motion(plan)
+        height = boundary.height(request.get("height"), self._volume)
+        return self._motion(lambda base: TakeOff(height))
 
     def _follow(self, request: Mapping[str, Any]) -> Reply:
         _only(request, "trajectory", "waypoints", "duration", "start_at")
-        duration = _duration(request.get("duration"))
-        start_at = _number(request.get("start_at"), "start_at", optional=True)
-        trajectory, duration_s = self._trajectory(request, duration)
         received_wall, received = self._wall(), self._clock()
+        deadline = time.monotonic() + self._plan_timeout
+        duration = boundary.duration(request.get("duration"))
+        start_at = boundary.start_at(request.get("start_at"), received_wall,
+                                     self._start_horizon)
+        start_in = 0.0 if start_at is None else start_at - received_wall
+        given = [k for k in ("trajectory", "waypoints") if request.get(k) is not None]
+        if len(given) != 1:
+            raise CommandRefusedError("request", "follow needs one of 'trajectory' (a "
+                                      "trajectory section) or 'waypoints' ([[t, x, y, z], ...])")
+        if given[0] == "waypoints":
+            job = PrepareFollow(None, boundary.waypoint_rows(
+                request["waypoints"], self._volume, self._min_step), duration, start_in)
+        else:
+            job = PrepareFollow(boundary.trajectory_section(
+                request["trajectory"], self._volume, self._max_yaw_rate), None, duration,
+                start_in)
+        self._in_loop(self._tracking)  # before the expensive part, as every motion
+        followable: Followable = self._planner.run(job, deadline)
 
-        def plan(base: PlanBase) -> Planned:
+        def spec(base: PlanBase) -> MotionSpec:
             start = None
             if start_at is not None:  # unix time -> trajectory time (both advance in TRACK)
-                start = base.now + (start_at - received_wall) - (self._clock() - received)
-            return plan_follow(base, trajectory, duration_s, self._limits, start)
-        return self._motion(plan)
+                start = base.now + start_in - (self._clock() - received)
+            return Follow(followable, start)
+        return self._motion(spec, received, deadline)
 
     def _hold(self, request: Mapping[str, Any]) -> Reply:
         _only(request)
-        return self._motion(lambda base: plan_hold(base, self._limits))
+        return self._motion(lambda base: Hold())
 
     def _land(self, request: Mapping[str, Any]) -> Reply:
         _only(request)
@@ -285,28 +312,35 @@ class MotionApi:
     }
 
     # ------------------------------------------------------------------ motions
-    def _motion(self, plan: Callable[[PlanBase], Planned]) -> Reply:
-        """Plan from the loop's state (outside the loop), install in the loop; again with
-        twice the lead if the loop moved on meanwhile."""
-        received = self._clock()
+    def _motion(self, spec: Callable[[PlanBase], MotionSpec], received: float | None = None,
+                deadline: float | None = None) -> Reply:
+        """Plan ``spec`` from the loop's state (in the planner, by ``deadline``: monotonic
+        [s], default ``api.plan_timeout_s`` from now), install it in the loop; again with a
+        longer lead if the loop moved past the start meanwhile. ``received``: when the
+        request arrived (``clock`` [s], default now)."""
+        if received is None:
+            received = self._clock()
+        if deadline is None:
+            deadline = time.monotonic() + self._plan_timeout
         lead = PLAN_LEAD_S
         for _attempt in range(INSTALL_ATTEMPTS):
+            began = time.monotonic()
             base = self._in_loop(partial(self._base, lead))
-            planned = plan(base)
+            planned = plan_with(self._planner, spec(base), base, deadline)
             planned.motion.received = received
             try:
                 motion = self._in_loop(partial(self._install, planned))
             except CommandRefusedError as exc:
                 if exc.kind != "busy":
                     raise
-                lead *= 2.0
+                lead = max(2.0 * lead, 1.5 * (time.monotonic() - began))
                 continue
             log.info("motion accepted", id=motion.id, kind=motion.kind,
                      target=[round(float(v), 3) for v in motion.target],
                      duration_s=round(motion.end - motion.start, 2))
             return {"ok": True, "motion": motion.report(), "state": State.TRACK.name}
         raise CommandRefusedError("busy", "the flight changed its plan while this motion was "
-                                  "planned, three times: try again")
+                                  f"planned, {INSTALL_ATTEMPTS} times: try again")
 
     def _commander(self) -> Commander:
         commander = self.core.commander
@@ -316,8 +350,8 @@ class MotionApi:
                 f"({self.config.trajectory.name}); motions need `gs fly --trajectory none`")
         return commander
 
-    def _base(self, lead: float) -> PlanBase:
-        """In the loop: what to plan from, or a refusal unless tracking."""
+    def _tracking(self) -> Commander:
+        """In the loop: the commander, or a refusal unless tracking."""
         commander = self._commander()
         state = self.core.state
         if state is not State.TRACK:
@@ -326,6 +360,12 @@ class MotionApi:
             else:
                 reason = f"{state.name}: {_state_reason(self.core)}"
             raise CommandRefusedError("state", reason)
+        return commander
+
+    def _base(self, lead: float) -> PlanBase:
+        """In the loop: what to plan from, or a refusal unless tracking."""
+        commander = self._tracking()
+        state = self.core.state
         mission = self.core.mission
         return commander.base(mission.trajectory_time, mission.heading_offset, state.name,
                               mission.ground, lead)
@@ -337,46 +377,6 @@ class MotionApi:
             raise CommandRefusedError("state", f"{self.core.state.name}: "
                                       + _state_reason(self.core))
         return commander.install(planned, self.core.mission.trajectory_time)
-
-    def _trajectory(self, request: Mapping[str, Any],
-                    duration: float | None) -> tuple[Trajectory, float]:
-        """The shaped, checked trajectory of a ``follow`` request and its duration [s]."""
-        given = [k for k in ("trajectory", "waypoints") if request.get(k) is not None]
-        if len(given) != 1:
-            raise CommandRefusedError("request", "follow needs one of 'trajectory' (a "
-                                      "trajectory section) or 'waypoints' ([[t, x, y, z], ...])")
-        try:
-            if given[0] == "waypoints":
-                rows = request["waypoints"]
-                if not isinstance(rows, list) or len(rows) > MAX_WAYPOINTS or \
-                        not all(isinstance(r, list) for r in rows):
-                    raise CommandRefusedError(
-                        "request", f"waypoints: a list of at most {MAX_WAYPOINTS} rows "
-                        "[t, x, y, z(, yaw)]")
-                section = self.config.trajectory
-                try:
-                    path = waypoints_from_rows(rows, smoothing_s=section.corner_smoothing_s,
-                                               yaw=None, source="waypoints")
-                except TrajectoryError as exc:
-                    raise CommandRefusedError("request", str(exc)) from None
-                return trajectory_for_flight(self.config, path, duration)
-            section_data = request["trajectory"]
-            if not isinstance(section_data, dict):
-                raise CommandRefusedError("request", "trajectory: an object like the "
-                                          "configuration's trajectory section")
-            try:
-                section = TrajectoryConfig.model_validate(section_data)
-            except ValidationError as exc:
-                raise CommandRefusedError("request", "trajectory: " + describe_problems(exc)
-                                          ) from None
-            if section.name in ("none", "waypoints"):
-                raise CommandRefusedError("request", f"trajectory: name {section.name!r}: "
-                                          "give waypoints as 'waypoints'")
-            config = self.config.model_copy(update={"trajectory": section})
-            return trajectory_for_flight(config, None, duration)
-        except TrajectoryError as exc:
-            raise CommandRefusedError("volume" if "outside" in str(exc) else "infeasible",
-                                      str(exc)) from None
 
     # ------------------------------------------------------------------ status
     def status(self) -> Reply:
@@ -420,28 +420,3 @@ def _only(request: Mapping[str, Any], *fields: str) -> None:
     if unknown:
         raise CommandRefusedError("request", f"unknown field(s) {', '.join(unknown)[:80]} "
                                   f"(known: {', '.join(fields) or 'none'})")
-
-
-def _number(value: Any, what: str, optional: bool = False) -> Any:
-    if value is None and optional:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | float) or \
-            not math.isfinite(value):
-        raise CommandRefusedError("request", f"{what}: must be a finite number, got "
-                                  f"{str(value)[:40]}")
-    return float(value)
-
-
-def _duration(value: Any) -> float | None:
-    duration = _number(value, "duration", optional=True)
-    if duration is not None and not 0.0 < duration <= MAX_MOTION_S:
-        raise CommandRefusedError("request", f"duration {duration:g} s: must be in "
-                                  f"(0, {MAX_MOTION_S:g}]")
-    return duration  # type: ignore[no-any-return]
-
-
-def _vector(value: Any, what: str) -> np.ndarray:
-    if not isinstance(value, list | tuple) or len(value) != 3:
-        raise CommandRefusedError("request", f"{what}: must be 3 numbers (NED, m), got "
-                                  f"{str(value)[:60]}")
-    return np.array([_number(v, what) for v in value])

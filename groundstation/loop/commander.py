@@ -13,8 +13,9 @@ Planning and flying are split so that the flight loop never waits for a client:
   thread. It is a :class:`~groundstation.control.trajectory.Trajectory` on the
   mission's trajectory clock (which HOLD pauses) and keeps the motions' book:
   started, arrived, pre-empted, how long the vehicle has been idle.
-* The ``plan_*`` functions are pure and run where the request arrived (the control
-  socket's thread). They start from a :class:`PlanBase`, the plan in force and the
+* The ``plan_*`` functions are pure and run off the loop, in the planner process
+  (:mod:`groundstation.loop.planner`). They start from a :class:`PlanBase`, the plan in
+  force and the
   trajectory time at which the new motion will begin (:data:`PLAN_LEAD_S` ahead of
   the loop), so the motion continues the reference exactly: position, velocity,
   acceleration and heading rate carry over. The loop installs the result
@@ -64,25 +65,44 @@ DEFAULT_MOVE_ACCEL_M_S2 = 1.0
 limits allow g tan(20 deg) = 3.6): brisk but far from the tilt limit."""
 
 MAX_MOTION_S = 600.0
-"""Longest motion accepted [s]."""
+"""Longest motion accepted [s], from its start to rest at its end, however its length
+arises: a given duration, a trajectory's lap, the approach to a trajectory plus the
+trajectory, a later ``start_at``. It also bounds the work of planning one (the checks
+sample a motion's whole length)."""
 
-RefusalKind = Literal["request", "state", "volume", "infeasible", "busy"]
+MIN_MOTION_S = 0.2
+"""Shortest duration or trajectory period accepted [s]: about the vehicle's rate-loop
+rise time (0.14 s, thesis Fig. 3.8) plus its command delay, so nothing shorter can be
+flown as asked; and twenty samples of the feasibility check's 10 ms, so nothing it
+checks moves between two of them."""
+
+RefusalKind = Literal["request", "state", "volume", "infeasible", "busy", "internal"]
 
 
 class CommandRefusedError(GroundStationError):
     """A motion command the ground station will not fly; ``kind`` says why:
 
-    request : malformed (a position that is not 3 finite numbers, an unknown field)
+    request : malformed or absurd (a position that is not 3 finite numbers, a heading
+        beyond one turn, a duration outside [MIN_MOTION_S, MAX_MOTION_S], an unknown
+        field)
     state : not now (not tracking yet, a failsafe acts, the flight has ended)
-    volume : a point outside the flight volume less its margin
-    infeasible : beyond the vehicle's or the configured limits (speed, tilt, turn rate)
-    busy : another motion was installed while this one was planned (plan again)
+    volume : a point outside the flight volume (the sides and the ceiling less its
+        margin; the floor itself)
+    infeasible : beyond the vehicle's or the configured limits (speed, tilt, turn rate,
+        a motion longer than MAX_MOTION_S, a plan not made within its deadline)
+    busy : the plan changed while this one was planned, or the planner is starting (try
+        again)
+    internal : the ground station failed to answer (a fault of ours, logged)
     """
 
     def __init__(self, kind: RefusalKind, reason: str) -> None:
         super().__init__(reason)
         self.kind: RefusalKind = kind
         self.reason = reason
+
+    def __reduce__(self) -> tuple[type[CommandRefusedError], tuple[RefusalKind, str]]:
+        """Pickled with its kind (it may cross to or from the planner process)."""
+        return type(self), (self.kind, self.reason)
 
 
 # --------------------------------------------------------------------------- pieces
@@ -282,17 +302,22 @@ def _state4(ref: Reference) -> tuple[FloatArray, FloatArray, FloatArray]:
             np.append(ref.acceleration, 0.0))
 
 
-def _check_target(point: FloatArray, volume: Volume) -> None:
-    """CommandRefusedError('volume') unless ``point`` is inside the volume less its margin (the
-    floor excepted)."""
+def check_target(point: FloatArray, volume: Volume, what: str = "") -> None:
+    """CommandRefusedError('volume') unless ``point`` (NED [m]) is inside the volume: the
+    sides and the ceiling less the margin, down to the floor itself (the floor has no
+    margin, as in the feasibility check: a reference may go down to it). ``what`` starts
+    the reason (e.g. ``"waypoint 3: "``)."""
     m = volume.margin_m
-    for axis, (lo, hi) in zip("xyz", (volume.x, volume.y, volume.z), strict=True):
-        v = float(point["xyz".index(axis)])
-        upper = hi if axis == "z" else hi - m
-        if not lo + m <= v <= upper:
-            raise CommandRefusedError(
-                "volume", f"{axis} = {v:.2f} m is outside {volume.name}_{axis} "
-                f"[{lo:.2f}, {hi:.2f}] less the {m:.2f} m margin")
+    for k, (axis, (lo, hi)) in enumerate(zip("xyz", (volume.x, volume.y, volume.z),
+                                             strict=True)):
+        v = float(point[k])
+        box = f"{volume.name}_{axis} [{lo:.2f}, {hi:.2f}]"
+        if axis == "z" and v > hi:
+            raise CommandRefusedError("volume", f"{what}z = {v:.2f} m is below the floor: "
+                                      f"outside {box} (the floor has no margin)")
+        if not lo + m <= v <= (hi if axis == "z" else hi - m):
+            raise CommandRefusedError("volume", f"{what}{axis} = {v:.2f} m is outside {box} "
+                                      f"less the {m:.2f} m margin")
 
 
 def _move_duration(start: Reference, target: FloatArray, yaw: float,
@@ -311,9 +336,11 @@ def _move_duration(start: Reference, target: FloatArray, yaw: float,
 
 @dataclass
 class _PlanView:
-    """``pieces`` seen from time ``start`` as a trajectory from 0 (for the checker)."""
+    """``plan`` seen from time ``start`` as a trajectory from 0 (for the checker; it has no
+    attribute ``pieces``, the name by which the checker finds trajectories that describe
+    themselves exactly)."""
 
-    pieces: Plan
+    plan: Plan
     start: float
     duration: float
     name: str = "motion"
@@ -321,7 +348,7 @@ class _PlanView:
     free_heading: bool = False
 
     def sample(self, t: float) -> Reference:
-        return sample_plan(self.pieces, self.start + t)
+        return sample_plan(self.plan, self.start + t)
 
 
 def _check(pieces: Plan, start: float, horizon: float, limits: MotionLimits) -> None:
@@ -340,15 +367,20 @@ def plan_go_to(base: PlanBase, target: FloatArray, yaw: float | None,
                kind: MotionKind = "go_to") -> Planned:
     """A move from the reference at ``base.start`` to rest at ``target`` (NED [m]) with the
     absolute heading ``yaw`` [rad] (None: keep the heading), taking ``duration`` [s] (None:
-    see :func:`_move_duration`). Raises CommandRefusedError."""
-    _check_target(target, limits.volume)
+    see :func:`_move_duration`). Raises CommandRefusedError: ``request`` for a given
+    duration outside [MIN_MOTION_S, MAX_MOTION_S], ``infeasible`` for a sized one longer
+    than MAX_MOTION_S."""
+    check_target(target, limits.volume)
+    if duration is not None and not MIN_MOTION_S <= duration <= MAX_MOTION_S:
+        raise CommandRefusedError("request", f"duration {duration:g} s: must be in "
+                                  f"[{MIN_MOTION_S:g}, {MAX_MOTION_S:g}] s")
     ref = base.reference()
     goal_yaw = ref.yaw if yaw is None else ref.yaw + wrap_angle(yaw - base.offset - ref.yaw)
     if duration is None:
         duration = _move_duration(ref, target, goal_yaw, limits)
-    if not (math.isfinite(duration) and 0.0 < duration <= MAX_MOTION_S):
-        raise CommandRefusedError("request", f"duration {duration!r}: must be a number of seconds "
-                             f"in (0, {MAX_MOTION_S:g}]")
+        if not duration <= MAX_MOTION_S:
+            raise CommandRefusedError("infeasible", f"the move would take {duration:.1f} s, "
+                                      f"longer than a motion may ({MAX_MOTION_S:g} s)")
     p0, v0, a0 = _state4(ref)
     move = QuinticMove.between(base.start, duration, p0, v0, a0,
                                np.append(target, goal_yaw))
@@ -397,9 +429,15 @@ def plan_follow(base: PlanBase, trajectory: Trajectory, duration: float,
     if start_at is not None:
         if start_at < move.end:
             raise CommandRefusedError("infeasible", f"the trajectory's start is "
-                                 f"{move.end - base.start:.1f} s away, more than the "
-                                 f"{start_at - base.start:.1f} s until start_at")
+                                      f"{move.end - base.start:.1f} s away, more than the "
+                                      f"{start_at - base.start:.1f} s until start_at")
         begin = start_at
+    length = begin + duration - base.start
+    if not length <= MAX_MOTION_S:
+        raise CommandRefusedError(
+            "infeasible", f"the motion would last {length:.1f} s (to the start "
+            f"{begin - base.start:.1f} s, then the trajectory {duration:.1f} s), longer than "
+            f"a motion may ({MAX_MOTION_S:g} s): give a shorter duration")
     end_ref = trajectory.sample(duration)
     end_yaw = end_ref.yaw + yaw_offset
     pieces: Plan = (move, Rest(move.end, first.position.copy(), move.sample(move.end).yaw),
