@@ -5,7 +5,8 @@ package. :func:`main` (the console entry point) is the one error boundary around
 all of them: a one-line ``error: ...`` and a documented exit code, never a
 traceback, for a user's mistake. Exit codes: 0 success; 1 runtime failure (also a
 missing optional package); 2 bad configuration, usage, or a file that cannot be
-used; `gs fly` adds 3 (could not start) and 4 (stopped on request), see its help;
+used; `gs fly` adds 3 (could not start), 4 (stopped on request) and 5 (flight log
+incomplete), see its help;
 130 Ctrl-C; 141 the reader of the output went away (``gs export LOG | head``).
 """
 
@@ -126,8 +127,9 @@ def fly(
 ) -> None:
     """Fly: preflight, take off, track the trajectory, land, hand back to the pilot.
 
-    SIGINT/SIGTERM lands; a second one at least safety.second_signal_after_s
-    (0.5 s) after the first hands back at once.
+    SIGINT, SIGTERM, SIGHUP (the terminal went away) and SIGQUIT land; a
+    second one (not SIGHUP) at least safety.second_signal_after_s (0.5 s) after
+    the first hands back at once.
 
     Exit codes:
     0  mission completed: landed and handed back, no failsafe
@@ -138,8 +140,10 @@ def fly(
     3  could not start: serial port absent or in use by another flight, Vicon
        or telemetry port taken, log directory not writable (nothing was sent
        to the vehicle)
-    4  stopped on request (SIGINT/SIGTERM): landed, or handed back at a second
-       request
+    4  stopped on request (SIGINT/SIGTERM, SIGHUP, SIGQUIT): landed, or handed
+       back at a second request
+    5  flight log incomplete: flown without a failsafe, but rows were lost (disk
+       full, I/O error) or meta.json not written; before 0 and 4, never before 1
     """
     overrides: dict[str, Any] = {
         "serial.port": serial_port, "vicon.port": vicon_port, "vicon.object_name": vicon_object,
@@ -154,7 +158,7 @@ def fly(
     cfg = load(config, overrides)
     from groundstation.loop.flight import fly_command
 
-    raise typer.Exit(fly_command(cfg, duration_s=duration, demo=demo, echo=typer.echo))
+    raise typer.Exit(fly_command(cfg, duration_s=duration, demo=demo))  # stdout, never blocking
 
 
 @app.command()

@@ -132,7 +132,8 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     link = meta["outcome"].pop("link")
     assert meta["outcome"] == {"outcome": "COMPLETED", "exit_code": 0, "final_state": "DONE",
                                "reason": summary.reason, "failsafe_transitions": [],
-                               "events": []}
+                               "events": [], "log": {"complete": True, "rows": len(rows),
+                                                     "rows_lost": 0, "reasons": {}}}
     # DATA of status, gyro, acc, rc (41 B) at 100 Hz: 4100 B/s, 71 % of the 5760 B/s line
     assert link["protocol"] == "x3d" and 0.6 < link["in_line_share"] < 0.75
     assert link["rejected"] == 0 and link["unexpected_data"] == 0

@@ -4,7 +4,9 @@ compared field by field through independent readers (np.load, np.genfromtxt, jso
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
+import errno
 import io
 import json
 import os
@@ -13,6 +15,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -352,3 +355,119 @@ def test_a_schema_3_log_is_read_with_the_new_columns_filled(tmp_path: Path) -> N
     np.save(rec.path, np.zeros(3, dtype=[("unknown", "<f8")]))
     with pytest.raises(RecorderError, match="cannot be read"):
         read_flight(rec.directory)
+
+
+@pytest.fixture
+def tiny_disk(tmp_path: Path) -> Iterator[Callable[[str], Path]]:
+    """``mount(size)``: a tmpfs of ``size`` (``"400k"``) mounted in tmp_path, unmounted
+    after the test. A real full disk: writes fail with ENOSPC in the kernel, as they do
+    on the lab machine's disk."""
+    if os.geteuid() != 0:
+        pytest.skip("mounting a tmpfs in the test's own process needs root (the "
+                    "full-disk flight in test_daemon_exits.py uses unshare -rm instead)")
+    mounted: list[Path] = []
+
+    def mount(size: str) -> Path:
+        where = tmp_path / f"disk{len(mounted)}"
+        where.mkdir()
+        subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(where)],
+                       check=True, capture_output=True)
+        mounted.append(where)
+        return where
+
+    yield mount
+    for where in mounted:
+        subprocess.run(["umount", "-l", str(where)], check=False, capture_output=True)
+
+
+def free_bytes(path: Path) -> int:
+    st = os.statvfs(path)
+    return st.f_bavail * st.f_frsize
+
+
+def fill(disk: Path, leave: int = 0) -> None:
+    """Write a ballast file until the disk has ``leave`` bytes free (0: full)."""
+    fd = os.open(disk / "ballast", os.O_WRONLY | os.O_CREAT | os.O_EXCL)
+    try:
+        with contextlib.suppress(OSError):  # ENOSPC: full
+            while (room := free_bytes(disk) - leave) > 0:
+                os.write(fd, bytes(min(room, 1 << 16)))
+    finally:
+        os.close(fd)
+    assert free_bytes(disk) <= leave
+
+
+def test_a_disk_that_fills_loses_rows_counts_them_and_keeps_the_end(
+        tiny_disk: Callable[[str], Path]) -> None:
+    """400 kB: after the reserves (meta.json 64 kB, 256 rows) about 200 rows fit. 600
+    ticks at 100 Hz: the disk fills after the second flush; every later flush is lost
+    until the last, which writes the flight's last second into the reserve."""
+    disk = tiny_disk("400k")
+    rng = np.random.default_rng(9)
+    ticks = [make_tick(rng, k) for k in range(600)]
+    rec = FlightRecorder.create(disk, CONFIG, {"supervisor_states": STATES})
+    for args in ticks:
+        rec.append(**args)
+    assert free_bytes(disk) < 100 * RECORD_DTYPE.itemsize  # really full
+    rec.meta["outcome"] = {"exit_code": 5}
+    rec.close()
+    enospc = os.strerror(errno.ENOSPC)
+    assert rec.rows_dropped > 0 and rec.lost_by_reason == {enospc: rec.rows_dropped}
+    data, meta, _ = read_flight(rec.directory)
+    index = np.rint((data["t"] - 100.0) / 0.01).astype(int)  # which tick each row is
+    assert_rows(data, [ticks[k] for k in index])
+    assert index[-1] == 599 and np.all(np.diff(index) >= 1)  # the end is there, in order
+    written_then_lost = np.flatnonzero(np.diff(index) > 1)
+    assert len(written_then_lost) == 1  # one gap: from the full disk to the last flush
+    assert len(data) + rec.rows_dropped == 600
+    assert meta["rows"] == len(data) and meta["rows_dropped"] == rec.rows_dropped
+    assert meta["lost_rows_by_reason"] == {enospc: rec.rows_dropped}
+    assert meta["outcome"] == {"exit_code": 5}
+    loss = rec.loss()
+    assert not loss.complete and loss.describe() == (
+        f"flight log incomplete: {rec.rows_dropped} of 600 rows lost ({enospc})")
+    assert sorted(p.name for p in rec.directory.iterdir()) == ["config.yaml", "flight.npy",
+                                                               "meta.json"]
+    # the unused reserve went back to the disk: the file holds its header and rows only
+    with rec.path.open("rb") as f:
+        assert np.lib.format.read_magic(f) == (1, 0)
+        np.lib.format.read_array_header_1_0(f)  # numpy's reader: where the rows start
+        header = f.tell()
+    assert os.path.getsize(rec.path) == header + len(data) * RECORD_DTYPE.itemsize
+    assert free_bytes(disk) > 100 * RECORD_DTYPE.itemsize
+
+
+def test_the_outcome_reaches_meta_json_on_a_full_disk(
+        tiny_disk: Callable[[str], Path]) -> None:
+    """The finding: meta.json had no outcome and an empty meta.json.tmp was left. The
+    final meta.json is written into space allocated at the start."""
+    disk = tiny_disk("256k")
+    rng = np.random.default_rng(10)
+    rec = FlightRecorder.create(disk, CONFIG, {"supervisor_states": STATES},
+                                reserve_rows=16)
+    rec.append(**make_tick(rng, 0))  # written at once
+    fill(disk)
+    with pytest.raises(OSError) as full:
+        (disk / "probe").write_bytes(b"x")
+    assert full.value.errno == errno.ENOSPC
+    ticks = [make_tick(rng, k) for k in range(1, 11)]
+    for args in ticks:
+        rec.append(**args)  # buffered: the flush interval has not passed
+    rec.meta["outcome"] = {"outcome": "COMPLETED", "exit_code": 0, "reason": "x" * 2000}
+    rec.close()
+    assert rec.meta_error == "" and rec.rows_dropped == 0
+    data, meta, _ = read_flight(rec.directory)  # json.loads: valid JSON
+    assert meta["outcome"]["reason"] == "x" * 2000 and meta["rows"] == 11
+    assert_rows(data[1:], ticks)  # the last flush went into the reserve
+    assert not list(disk.rglob("*.tmp")) and not list(disk.rglob("*.reserve"))
+
+
+def test_a_disk_too_full_to_start_refuses_and_leaves_no_temporary(
+        tiny_disk: Callable[[str], Path]) -> None:
+    """Room for config.yaml only: meta.json cannot be written, and the flight does not
+    start (`gs fly` exits 3) rather than fly without a log that can say how it ended."""
+    disk = tiny_disk("256k")
+    fill(disk, leave=4096)  # one page: config.yaml
+    with pytest.raises(RecorderError, match="cannot start a flight log"):
+        FlightRecorder.create(disk / "logs", CONFIG, {"supervisor_states": STATES})
+    assert [p.name for p in disk.rglob("*") if p.is_file()] == ["ballast", "config.yaml"]

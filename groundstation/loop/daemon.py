@@ -29,10 +29,18 @@ reader thread holding the GIL cannot delay a tick by more, and paces the garbage
 collector (``realtime.paced_gc``): start-up objects frozen, full collections only
 right after a COMMAND went out (see :mod:`groundstation.loop.realtime`).
 
-Stopping: the first SIGINT/SIGTERM asks the supervisor to land (or hand back,
-see ``safety.on_signal``); a second one at least ``safety.second_signal_after_s``
+Stopping: the first stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT: see
+:mod:`groundstation.loop.signals`) asks the supervisor to land (or hand back, see
+``safety.on_signal``); a second one at least ``safety.second_signal_after_s``
 (0.5 s) later hands back at once, closer ones are the same request (GNU
-``timeout`` signals the process and then its group within a millisecond).
+``timeout`` signals the process and then its group within a millisecond). A
+hangup (SIGHUP: the terminal went away) counts only as a first request, never as
+the second.
+
+Output cannot stop a flight: the progress lines go to the caller's ``progress``
+(``gs fly`` hands it a :class:`~groundstation.logs.LineSink`) and the log lines through
+one (:func:`~groundstation.logs.log_through_sink`), so a paused, closed or hung-up
+terminal blocks or fails a writer thread, never the loop or the landing.
 
 Every way out ends in a terminal supervisor state with its reason: a serial link
 that fails mid-flight is LINK_LOST, an unexpected error in the loop ABORTED (logged
@@ -41,6 +49,10 @@ ctrl mask 0) and :meth:`FlightDaemon.run` returns the summary. The link sends a
 final COMMAND with ctrl mask 0 if it ever flew the vehicle, the flight log is
 flushed and closed with the outcome in its meta.json, and systemd hears STOPPING.
 Only a resource that cannot be opened raises (nothing was sent to the vehicle).
+
+A flight log that lost rows (a full disk, an I/O error) is an outcome too: the
+flight goes on and lands, and the summary (:attr:`FlightSummary.log`,
+:attr:`FlightSummary.exit_code`) and meta.json say what is missing and why.
 """
 
 from __future__ import annotations
@@ -64,6 +76,7 @@ from groundstation.config import GroundStationConfig, dump_config
 from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import LinkError
+from groundstation.logs import log_through_sink
 from groundstation.loop.api import LoopInbox, MotionApi
 from groundstation.loop.core import FlightCore, TickResult
 from groundstation.loop.inputs import DataFrontEnd, VehicleStatus
@@ -76,9 +89,9 @@ from groundstation.loop.realtime import (
     fifo_priority,
     switch_interval,
 )
-from groundstation.loop.recorder import FlightRecorder
+from groundstation.loop.recorder import FlightRecorder, LogLoss
 from groundstation.loop.sdnotify import SdNotifier
-from groundstation.loop.signals import StopRequests, on_stop_signals
+from groundstation.loop.signals import HANGUP_SIGNALS, StopRequests, on_stop_signals
 from groundstation.loop.supervisor import FailsafeEvent, Outcome, State, Transition
 from groundstation.loop.ticklog import TickLogger
 from groundstation.loop.timing import TimingHistogram
@@ -96,6 +109,10 @@ RESEND_CONFIG_AFTER_S = 0.5
 FINAL_LINGER_S = 0.2
 """How long the flight's final telemetry may take to reach subscribers before the
 publisher closes [s] (a local subscriber takes well under a millisecond)."""
+
+EXIT_LOG_INCOMPLETE = 5
+"""``gs fly``'s exit code for a flight flown without a failsafe whose log is incomplete
+(:attr:`FlightSummary.exit_code`)."""
 
 
 @dataclass
@@ -121,6 +138,7 @@ class FlightSummary:
     link, protocol, baud : the serial link's counters at the end (bytes each way,
         rejections; in the AscTec LL dialect polls and acknowledgements), its dialect and
         line rate [baud]
+    log : what the flight log is missing (rows lost and why, meta.json not written)
     """
 
     final_state: State
@@ -148,6 +166,18 @@ class FlightSummary:
     baud: int = 57600
     mcap: str = ""
     """With ``logging.mcap``: the flight's MCAP file, or why it was not written."""
+    log: LogLoss = field(default_factory=LogLoss)
+
+    @property
+    def exit_code(self) -> int:
+        """``gs fly``'s exit code: the outcome's value, except that a flight whose log is
+        incomplete exits :data:`EXIT_LOG_INCOMPLETE` (5) instead of 0 or 4. A failsafe
+        keeps 1: it is what the vehicle did, the more urgent news (the summary's first
+        line and meta.json still say the log is incomplete). And an incomplete log wins
+        over 4: a stop on request is what the operator asked for, lost data is not."""
+        if self.outcome is Outcome.FAILSAFE or self.log.complete:
+            return int(self.outcome)
+        return EXIT_LOG_INCOMPLETE
 
     def percentiles(self) -> dict[str, tuple[float, float]]:
         """p50 and p99 of compute time, |jitter| and latency [s]."""
@@ -180,7 +210,10 @@ class FlightDaemon:
     config : validated configuration (``serial.port`` is the X-3D)
     duration_s : trajectory time before landing (default one trajectory period)
     controller, trajectory : replace the ones the configuration names
-    progress : called about once a second with a one-line status
+    progress : called about once a second with a one-line status, from the loop: it
+        must return at once (``gs fly`` passes a :class:`~groundstation.logs.LineSink`'s
+        ``put``); an exception it raises is logged and ends the progress lines, not the
+        flight
     stop : an extra way to ask for a stop (counts like a signal), e.g. from a test
     """
 
@@ -214,7 +247,7 @@ class FlightDaemon:
         """Set once every resource is open and the loop is about to start."""
 
     def _on_signal(self, sig: signal.Signals) -> None:
-        if self._stops.request():
+        if self._stops.request(escalates=sig not in HANGUP_SIGNALS):
             log.warning("signal", signal=sig.name, count=self._stops.count)
         else:
             log.warning("signal taken as a repeat of the first stop request", signal=sig.name,
@@ -233,6 +266,8 @@ class FlightDaemon:
         cfg = self.config
         notifier = SdNotifier.from_env()
         with ExitStack() as stack:
+            # first in, last out: every log line of the flight, its closing ones too
+            stack.enter_context(log_through_sink())
             stack.callback(notifier.stopping, "stopping: vehicle handed back")
             # first: the serial, Vicon and ZeroMQ threads started below inherit it
             stack.enter_context(fifo_priority(cfg.realtime.fifo_priority))
@@ -277,8 +312,10 @@ class FlightDaemon:
             self._stats.keepalive_resends = stats.keepalive_resends
             self._stats.link = stats
             self._stats.collector = pacer.stats
-            summary = self._summary()
+            recorder.finish()  # the last rows, so that the summary counts what is lost
+            summary = self._summary(recorder.loss())
             recorder.meta["outcome"] = _outcome_meta(summary)
+        summary.log = recorder.loss()  # now with meta.json's fate
         if cfg.logging.mcap and self.log_dir:  # the log is closed: the vehicle is the pilot's
             summary.mcap = _write_mcap(Path(self.log_dir))
         return summary
@@ -341,7 +378,8 @@ class FlightDaemon:
             io.notifier.watchdog()
             clock.next_wd = start + clock.wd_interval / 2
         if self._progress is not None and start >= clock.next_progress:
-            self._progress(self._progress_line(result, health.data_rate_hz, vicon_rate))
+            self._report_progress(self._progress_line(result, health.data_rate_hz, vicon_rate,
+                                                      io.recorder.rows_dropped))
             clock.next_progress = start + 1.0
         if result.due:
             io.pacer.after_command()  # a full collection, if due, now: the next COMMAND is
@@ -448,7 +486,17 @@ class FlightDaemon:
                 control=self._control_stats()),
         }
 
-    def _progress_line(self, result: TickResult, data_hz: float, vicon_hz: float) -> str:
+    def _report_progress(self, line: str) -> None:
+        """Hand ``line`` to the progress callback; one that raises is dropped."""
+        assert self._progress is not None
+        try:
+            self._progress(line)
+        except Exception as exc:  # the flight does not depend on who watches it
+            log.warning("progress lines stopped", error=repr(exc))
+            self._progress = None
+
+    def _progress_line(self, result: TickResult, data_hz: float, vicon_hz: float,
+                       rows_lost: int = 0) -> str:
         err = "-"
         if result.estimate is not None:
             e = float(np.linalg.norm(result.reference.position - result.estimate.position))
@@ -456,9 +504,10 @@ class FlightDaemon:
         volts = self._front.status.battery_v
         return (f"{result.state.name:<9} error {err}  DATA {data_hz:5.1f} Hz  "
                 f"Vicon {vicon_hz:5.1f} Hz  mask 0x{result.command.ctrl:X}  battery "
-                + ("--" if math.isnan(volts) else f"{volts:.2f} V"))
+                + ("--" if math.isnan(volts) else f"{volts:.2f} V")
+                + (f"  LOG: {rows_lost} rows lost" if rows_lost else ""))
 
-    def _summary(self) -> FlightSummary:
+    def _summary(self, log_loss: LogLoss | None = None) -> FlightSummary:
         s, sup = self._stats, self.core.supervisor
         return FlightSummary(
             final_state=sup.state, success=sup.success, transitions=list(sup.transitions),
@@ -473,6 +522,7 @@ class FlightDaemon:
             keepalive_resends=s.keepalive_resends, collector=s.collector,
             control=self._control_stats(), link=s.link,
             protocol=self.config.serial.protocol, baud=self.config.serial.baud,
+            log=log_loss if log_loss is not None else LogLoss(),
         )
 
 
@@ -511,8 +561,9 @@ def _vehicle_section(status: VehicleStatus) -> dict[str, object]:
 def _outcome_meta(summary: FlightSummary) -> dict[str, object]:
     """The flight's outcome for meta.json."""
     return {
-        "outcome": summary.outcome.name, "exit_code": int(summary.outcome),
+        "outcome": summary.outcome.name, "exit_code": summary.exit_code,
         "final_state": summary.final_state.name, "reason": summary.reason,
+        "log": summary.log.as_meta(),
         "failsafe_transitions": [
             {"t": tr.t, "old": tr.old.name, "new": tr.new.name, "reason": tr.reason}
             for tr in summary.transitions if tr.failsafe],

@@ -12,18 +12,26 @@ Returns the process exit code (:data:`EXIT_CODES`, printed by ``gs fly --help``)
 3. could not start: a resource could not be opened (the serial port absent or in use
    by another flight, the Vicon or telemetry port taken, the log directory not
    writable); nothing was sent to the vehicle;
-4. stopped on request (SIGINT/SIGTERM) without a failsafe: landed, or handed back at a
-   second request or as ``safety.on_signal`` configures.
+4. stopped on request (SIGINT/SIGTERM, SIGHUP: the terminal went away, SIGQUIT) without
+   a failsafe: landed, or handed back at a second request or as ``safety.on_signal``
+   configures;
+5. flown without a failsafe, but the flight log is incomplete: rows were lost (a full
+   disk, an I/O error) or meta.json could not be written. It takes precedence over 0
+   and 4, never over 1 (see :attr:`FlightSummary.exit_code`).
 
 Whatever the way out of a flight, the summary is printed (its first line says the final
-state, why, and the exit code) and the flight log's meta.json holds the same outcome.
-Resource errors are reported in one line, never as a traceback.
+state, why, whether the log is incomplete, and the exit code) and the flight log's
+meta.json holds the same outcome. Resource errors are reported in one line, never as a
+traceback. Output never stops a flight: every line goes through a
+:class:`~groundstation.logs.LineSink`, so a closed, hung-up or paused terminal loses
+lines, not the landing.
 """
 
 from __future__ import annotations
 
 import math
 import shutil
+import sys
 import tempfile
 from collections.abc import Callable
 from contextlib import ExitStack
@@ -31,8 +39,14 @@ from pathlib import Path
 
 from groundstation.config import GroundStationConfig, apply_overrides
 from groundstation.errors import ConfigError, GroundStationError
+from groundstation.logs import LineSink, log_through_sink, retire_lost_stream, stream_writer
 from groundstation.loop.core import FlightCore
-from groundstation.loop.daemon import FlightDaemon, FlightSummary, link_figures
+from groundstation.loop.daemon import (
+    EXIT_LOG_INCOMPLETE,
+    FlightDaemon,
+    FlightSummary,
+    link_figures,
+)
 from groundstation.loop.supervisor import Outcome
 
 Echo = Callable[[str], None]
@@ -49,8 +63,11 @@ EXIT_CODES: dict[int, str] = {
                 "(nothing connected)",
     EXIT_NOT_STARTED: "could not start: serial port absent or in use, Vicon or telemetry "
                       "port taken, log directory not writable (nothing sent to the vehicle)",
-    int(Outcome.STOPPED): "stopped on request (SIGINT/SIGTERM): landed, or handed back at a "
-                          "second request",
+    int(Outcome.STOPPED): "stopped on request (SIGINT/SIGTERM, SIGHUP, SIGQUIT): landed, or "
+                          "handed back at a second request",
+    EXIT_LOG_INCOMPLETE: "flight log incomplete: flown without a failsafe, but rows were "
+                         "lost (disk full, I/O error) or meta.json not written; before 0 "
+                         "and 4, never before 1",
 }
 """Exit code -> meaning, as ``gs fly --help`` and the README list them."""
 
@@ -63,9 +80,11 @@ _OUTCOME_WORDS = {
 
 def summary_lines(summary: FlightSummary) -> list[str]:
     """The short human-readable report printed after a flight."""
-    outcome = summary.outcome
+    words = _OUTCOME_WORDS[summary.outcome]
+    if not summary.log.complete:
+        words += f"; {summary.log.describe()}"
     lines = [f"flight ended in {summary.final_state.name}: {summary.reason} "
-             f"({_OUTCOME_WORDS[outcome]}, exit code {int(outcome)})"]
+             f"({words}, exit code {summary.exit_code})"]
     t0 = summary.transitions[0].t if summary.transitions else 0.0
     lines += [f"  {tr.t - t0:7.2f} s  {tr.old.name} -> {tr.new.name}: {tr.reason}"
               + ("  [failsafe]" if tr.failsafe else "") for tr in summary.transitions]
@@ -108,9 +127,28 @@ def summary_lines(summary: FlightSummary) -> list[str]:
 
 
 def fly_command(config: GroundStationConfig, *, duration_s: float | None = None,
-                demo: bool = False, echo: Echo = print) -> int:
+                demo: bool = False, echo: Echo | None = None) -> int:
     """Fly once; with ``demo`` start the virtual lab first and plot the result.
-    Returns the exit code (see the module docstring)."""
+    Returns the exit code (see the module docstring).
+
+    echo : where the lines go (default: this process's stdout, written below Python's
+        buffers, see :func:`~groundstation.logs.fd_writer`); called from a thread of
+        its own, so a blocked or failing ``echo`` delays or loses lines, never the
+        flight. Its last lines get :data:`~groundstation.logs.OUTPUT_DRAIN_S` to go out.
+    """
+    stdout = sys.stdout
+    out = LineSink(stream_writer(stdout) if echo is None else echo, "stdout")
+    try:
+        with log_through_sink():
+            return _fly(config, duration_s, demo, out.put)
+    finally:
+        out.close()
+        if echo is None:
+            retire_lost_stream(stdout, out)
+
+
+def _fly(config: GroundStationConfig, duration_s: float | None, demo: bool,
+         echo: Echo) -> int:
     try:  # the checks `gs check-config` runs, before anything is connected; the daemon
         # builds the core again (about 50 ms) for the configuration it flies
         FlightCore(config, duration_s=duration_s)
@@ -142,7 +180,7 @@ def fly_command(config: GroundStationConfig, *, duration_s: float | None = None,
             echo(line)
         if demo and summary.log_dir:
             _report(summary.log_dir, truth_file, echo)
-    return int(summary.outcome)
+    return summary.exit_code
 
 
 def _start_virtual_lab(config: GroundStationConfig, stack: ExitStack, workdir: Path,

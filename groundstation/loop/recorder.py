@@ -16,7 +16,16 @@ A flight is one directory ``<log_dir>/<UTC start, YYYYMMDDTHHMMSSZ>/`` holding
     package version, start wall-clock time (ISO 8601 UTC) and monotonic time,
     the unit of every column, the caller's metadata (by convention
     ``supervisor_states``: the state names, indexed by the ``state`` column) and,
-    after a clean close, end times and counters.
+    after a clean close, end times and counters (``rows``, ``rows_dropped``,
+    ``lost_rows_by_reason``, ``bad_rows``, ``write_errors``).
+
+A full disk loses rows, never the end of the flight. The recorder keeps
+:data:`RESERVE_ROWS` rows of ``flight.npy`` allocated (``posix_fallocate``) beyond
+those written and only its last flush may use them, so the flight's last second (its
+landing and final row) is written after the disk filled; and meta.json's final
+version is written into space allocated at the start (``meta.json.reserve``, renamed
+over meta.json: atomic, and no empty temporary left). Rows that could not be written
+are counted with their reason (:meth:`FlightRecorder.loss`).
 
 In memory and from :func:`read_flight` the same bytes are viewed as
 :data:`RECORD_DTYPE`, whose vector values are sub-array fields
@@ -87,11 +96,14 @@ Fields (frames: NED earth, FRD body; quaternions scalar-first, R(q) = eCb)::
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
+import errno
 import json
 import os
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -207,6 +219,21 @@ COLUMN_UNITS: dict[str, str] = {
 FLIGHT_FILE = "flight.npy"
 CONFIG_FILE = "config.yaml"
 META_FILE = "meta.json"
+META_RESERVE_FILE = "meta.json.reserve"
+"""Space for the final meta.json, allocated at the start; renamed over meta.json at the
+end (left behind only by a process killed in flight)."""
+
+RESERVE_ROWS = 256
+"""Rows of flight.npy kept allocated beyond the written ones for the last flush: 2.56 s
+at 100 Hz, more than the 1 s of rows a flush holds (about 190 kB)."""
+
+META_RESERVE_BYTES = 65536
+"""Space allocated for the final meta.json [bytes] (a flight's is about 6 kB)."""
+
+_NO_ROOM = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+"""Errors that say the disk (or quota, or file size limit) has no room: rows are lost.
+Any other error of ``posix_fallocate`` says it cannot allocate here (a device, a file
+system without it): the recorder then writes without a reserve."""
 
 # .npy v1.0 header with the shape first and fixed-width, so a flush rewrites only the
 # digits at a fixed offset (np.load accepts the spaces: the header is a Python literal).
@@ -255,11 +282,78 @@ def _new_flight_dir(log_dir: Path, start: dt.datetime) -> Path:
     raise FileExistsError(f"{log_dir}: too many flights stamped {stamp}")
 
 
+def _json_bytes(data: Mapping[str, Any]) -> bytes:
+    return (json.dumps(data, indent=2, default=str) + "\n").encode("utf-8")
+
+
 def _write_json(path: Path, data: Mapping[str, Any]) -> None:
-    """Write JSON atomically (temporary file, then rename)."""
+    """Write JSON atomically (temporary file, then rename); no temporary file is left
+    when it fails."""
     tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=str) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_bytes(_json_bytes(data))
+        os.replace(tmp, path)
+    except OSError:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def _why(exc: OSError) -> str:
+    """The OS's words for an error (``No space left on device``)."""
+    return exc.strerror or str(exc) or type(exc).__name__
+
+
+def _reserve(fd: int, size: int) -> None:
+    """Allocate ``size`` bytes of the new, empty file ``fd``: ``posix_fallocate``, or
+    zeros written where it cannot allocate. OSError when there is no room."""
+    try:
+        os.posix_fallocate(fd, 0, size)
+    except OSError as exc:
+        if exc.errno in _NO_ROOM:
+            raise
+        _pwrite_all(fd, memoryview(bytes(size)), 0)
+
+
+@dataclass(frozen=True)
+class LogLoss:
+    """What a flight log is missing.
+
+    rows : rows written
+    lost : rows not written: failed writes (a full disk, an I/O error) and rows whose
+        values did not fit the record
+    reasons : rows lost per reason (the OS's words, e.g. "No space left on device")
+    meta_error : why the final meta.json could not be written ("" if it was)
+    """
+
+    rows: int = 0
+    lost: int = 0
+    reasons: dict[str, int] = field(default_factory=dict)
+    meta_error: str = ""
+
+    @property
+    def complete(self) -> bool:
+        """True when nothing is missing."""
+        return self.lost == 0 and not self.meta_error
+
+    def describe(self) -> str:
+        """One clause for a summary: ``flight log incomplete: 570 of 3414 rows lost (No
+        space left on device)``; empty when complete."""
+        if self.complete:
+            return ""
+        parts = []
+        if self.lost:
+            why = ", ".join(reason if len(self.reasons) == 1 else f"{n} {reason}"
+                            for reason, n in self.reasons.items())
+            parts.append(f"{self.lost} of {self.rows + self.lost} rows lost ({why})")
+        if self.meta_error:
+            parts.append(f"meta.json not written ({self.meta_error})")
+        return "flight log incomplete: " + "; ".join(parts)
+
+    def as_meta(self) -> dict[str, object]:
+        """For meta.json: ``complete``, ``rows``, ``rows_lost``, ``reasons``."""
+        return {"complete": self.complete, "rows": self.rows, "rows_lost": self.lost,
+                "reasons": dict(self.reasons)}
 
 
 def _columns(buf: npt.NDArray[np.void]) -> dict[str, npt.NDArray[Any]]:
@@ -282,23 +376,26 @@ class FlightRecorder:
     the values into a preallocated row of a numpy buffer, no allocation, no I/O
     except when a flush is due). The buffer is written out when ``flush_interval_s``
     has passed since the last flush (judged on the ticks' own ``t``), when it is
-    full, and on :meth:`close`. Writes go straight to the kernel (``os.pwrite``),
-    so a killed process loses only the rows since the last flush; :meth:`close`
-    also fsyncs. A failed write (disk full) is logged and counted, never raised:
-    the flight goes on without those rows.
+    full, and on :meth:`finish` or :meth:`close`. Writes go straight to the kernel
+    (``os.pwrite``), so a killed process loses only the rows since the last flush;
+    :meth:`finish` also fsyncs. A failed write (disk full, I/O error) is logged and
+    counted with its reason, never raised: the flight goes on without those rows, and
+    the last flush writes into the reserve (see the module docstring).
     """
 
     def __init__(
         self, directory: Path, meta: dict[str, Any], *,
-        flush_interval_s: float = 1.0, capacity: int = 1024,
+        flush_interval_s: float = 1.0, capacity: int = 1024, reserve_rows: int = RESERVE_ROWS,
     ) -> None:
-        """Open ``directory/flight.npy`` (must not exist); prefer :meth:`create`.
+        """Open ``directory/flight.npy`` and allocate the reserves (neither file may
+        exist); prefer :meth:`create`. OSError when they cannot be written.
 
         flush_interval_s : longest time rows stay in memory [s], > 0
         capacity : rows buffered in memory, >= 1 (flushes early when full)
+        reserve_rows : rows kept allocated for the last flush, >= 0
         """
-        if not flush_interval_s > 0 or capacity < 1:
-            raise ValueError("flush_interval_s must be > 0 and capacity >= 1")
+        if not flush_interval_s > 0 or capacity < 1 or reserve_rows < 0:
+            raise ValueError("flush_interval_s must be > 0, capacity >= 1, reserve_rows >= 0")
         self.directory = directory
         self.path = directory / FLIGHT_FILE
         self.meta = meta
@@ -310,23 +407,40 @@ class FlightRecorder:
         self._n = 0
         self._on_disk = 0
         self._flush_due = -np.inf  # the first row is written at once
+        self._reserve = int(reserve_rows) * RECORD_DTYPE.itemsize
+        self._allocated = 0  # bytes of flight.npy allocated (posix_fallocate)
+        self._preallocate = True  # False where posix_fallocate cannot allocate
+        self._failing = False  # the last write failed (a recovery is logged)
         self.rows_dropped = 0
         """Rows lost to failed writes."""
+        self.lost_by_reason: dict[str, int] = {}
+        """Rows lost to failed writes, per reason (the OS's words)."""
         self.bad_rows = 0
         """append() calls whose values did not fit the record (skipped)."""
         self.write_errors = 0
         """Failed flushes."""
-        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
+        self.meta_error = ""
+        """Why the final meta.json could not be written ("" if it was, or not yet)."""
+        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC
+        self._meta_fd = os.open(directory / META_RESERVE_FILE, flags, 0o644)
+        self._fd = -1
         try:
+            _reserve(self._meta_fd, META_RESERVE_BYTES)
+            self._fd = os.open(self.path, flags, 0o644)
             _pwrite_all(self._fd, memoryview(_header(0)), 0)
+            self._allocate(_HEADER_LEN + self._reserve)
         except OSError:
-            os.close(self._fd)
+            for fd in (self._fd, self._meta_fd):
+                if fd >= 0:
+                    os.close(fd)
+            with contextlib.suppress(OSError):
+                (directory / META_RESERVE_FILE).unlink()
             raise
 
     @classmethod
     def create(
         cls, log_dir: str | Path, config_yaml: str, meta: Mapping[str, Any] | None = None, *,
-        flush_interval_s: float = 1.0, capacity: int = 1024,
+        flush_interval_s: float = 1.0, capacity: int = 1024, reserve_rows: int = RESERVE_ROWS,
     ) -> FlightRecorder:
         """Start a flight log in a new directory ``log_dir/<UTC start time>/``.
 
@@ -335,7 +449,9 @@ class FlightRecorder:
             ``{"supervisor_states": [s.name for s in State]}`` (JSON-serialisable;
             the recorder's own keys ``format``, ``schema_version``, ``version``,
             ``start_time``, ``start_monotonic``, ``units`` take precedence)
-        Raises RecorderError if the directory or files cannot be written.
+        reserve_rows : rows kept allocated for the last flush (:data:`RESERVE_ROWS`)
+        Raises RecorderError if the directory, the files or the reserves cannot be
+        written (a disk that cannot hold them is no place to start a flight).
         """
         start_wall = dt.datetime.now(dt.UTC)
         start_mono = time.monotonic()
@@ -352,7 +468,8 @@ class FlightRecorder:
             directory = _new_flight_dir(Path(log_dir), start_wall)
             (directory / CONFIG_FILE).write_text(config_yaml, encoding="utf-8")
             _write_json(directory / META_FILE, full)
-            return cls(directory, full, flush_interval_s=flush_interval_s, capacity=capacity)
+            return cls(directory, full, flush_interval_s=flush_interval_s, capacity=capacity,
+                       reserve_rows=reserve_rows)
         except OSError as exc:
             raise RecorderError(f"cannot start a flight log in {log_dir}: {exc}") from exc
 
@@ -486,54 +603,133 @@ class FlightRecorder:
 
         t : the current monotonic time [s] (default time.monotonic()); the next
             automatic flush is due ``flush_interval_s`` after it.
-        A write error is logged and counted (:attr:`write_errors`,
-        :attr:`rows_dropped`), never raised.
+        Rows are written only while the reserve stays allocated behind them (that is
+        the last flush's, :meth:`finish`). A write error is logged and counted
+        (:attr:`write_errors`, :attr:`rows_dropped`, :attr:`lost_by_reason`), never
+        raised.
         """
         self._flush_due = (time.monotonic() if t is None else t) + self._interval
+        self._write_rows(final=False)
+
+    def _write_rows(self, *, final: bool) -> None:
         n = self._n
         if n == 0 or self._fd < 0:
             return
         self._n = 0
         size = RECORD_DTYPE.itemsize
+        start = _HEADER_LEN + self._on_disk * size
+        first = 0  # the rows before it are lost
         try:
-            _pwrite_all(self._fd, self._bytes[: n * size].data,
-                        _HEADER_LEN + self._on_disk * size)
-            os.pwrite(self._fd, _count_field(self._on_disk + n), _COUNT_OFFSET)
+            try:
+                self._allocate(start + n * size + (0 if final else self._reserve))
+            except OSError as exc:
+                if not final:
+                    raise
+                # the last flush: the newest rows (the flight's end, its final row) into
+                # what is allocated; the older ones only if the disk takes them
+                first = max(0, n - max(0, self._allocated - start) // size)
+                self._lost(first, _why(exc))
+            _pwrite_all(self._fd, self._bytes[first * size: n * size].data, start)
+            os.pwrite(self._fd, _count_field(self._on_disk + n - first), _COUNT_OFFSET)
         except OSError as exc:
             self.write_errors += 1
-            self.rows_dropped += n
-            log.warning("flight log write failed", path=str(self.path), rows_lost=n,
-                        error=str(exc))
+            self._lost(n - first, _why(exc))
             return
-        self._on_disk += n
+        self._on_disk += n - first
+        if self._failing:
+            self._failing = False
+            log.warning("flight log writes resumed", path=str(self.path),
+                        rows_lost=self.rows_dropped)
 
-    def close(self) -> None:
-        """Flush, fsync and close the file, add end time and counters to meta.json.
+    def _lost(self, rows: int, reason: str) -> None:
+        """Count ``rows`` lost for ``reason``; the first loss of each reason is logged."""
+        if rows <= 0:
+            return
+        self.rows_dropped += rows
+        self._failing = True
+        if reason not in self.lost_by_reason:
+            log.warning("flight log write failed: rows lost", path=str(self.path),
+                        rows_lost=rows, error=reason)
+        self.lost_by_reason[reason] = self.lost_by_reason.get(reason, 0) + rows
 
-        Idempotent. Errors are logged, not raised (close runs while landing or
-        unwinding from another error).
-        """
+    def _allocate(self, end: int) -> None:
+        """Have flight.npy allocated up to ``end`` bytes. OSError when the disk has no
+        room; where posix_fallocate cannot allocate, plain writes from then on."""
+        if not self._preallocate or end <= self._allocated:
+            return
+        try:
+            os.posix_fallocate(self._fd, self._allocated, end - self._allocated)
+        except OSError as exc:
+            if exc.errno in _NO_ROOM:
+                raise
+            self._preallocate = False
+            log.info("flight log: no space reserved (cannot allocate here)",
+                     path=str(self.path), error=_why(exc))
+            return
+        self._allocated = end
+
+    def finish(self) -> None:
+        """End the rows: write the buffered ones (into the reserve), give the unused
+        reserve back to the disk, fsync and close flight.npy. Idempotent; errors are
+        logged and counted, not raised (it runs while landing or unwinding from another
+        error). :meth:`loss` is final after it; :meth:`close` then writes meta.json."""
         if self._fd < 0:
             return
-        self.flush()
+        self._flush_due = time.monotonic() + self._interval
+        self._write_rows(final=True)
+        try:  # the unused reserve back to the disk
+            os.ftruncate(self._fd, _HEADER_LEN + self._on_disk * RECORD_DTYPE.itemsize)
+        except OSError as exc:
+            log.warning("flight log trim failed", path=str(self.path), error=_why(exc))
         try:
             os.fsync(self._fd)
         except OSError as exc:
-            log.warning("flight log fsync failed", path=str(self.path), error=str(exc))
+            log.warning("flight log fsync failed", path=str(self.path), error=_why(exc))
         os.close(self._fd)
         self._fd = -1
         self._buf = self._buf[:0]  # later appends hit IndexError and are counted, not written
         self._cols = _columns(self._buf)
+
+    def loss(self) -> LogLoss:
+        """What the log is missing so far (final after :meth:`finish`; after
+        :meth:`close` also whether meta.json was written)."""
+        reasons = dict(self.lost_by_reason)
+        if self.bad_rows:
+            reasons["values that did not fit the record"] = self.bad_rows
+        return LogLoss(rows=self._on_disk, lost=self.rows_dropped + self.bad_rows,
+                       reasons=reasons, meta_error=self.meta_error)
+
+    def close(self) -> None:
+        """:meth:`finish`, then add end time and counters to meta.json and write it into
+        its reserve, renamed over the old one (atomic).
+
+        Idempotent. Errors are logged (and :attr:`meta_error` says why), not raised.
+        """
+        self.finish()
+        if self._meta_fd < 0:
+            return
         self.meta.update(
             end_time=dt.datetime.now(dt.UTC).isoformat(), end_monotonic=time.monotonic(),
-            rows=self._on_disk, rows_dropped=self.rows_dropped, bad_rows=self.bad_rows,
-            write_errors=self.write_errors,
+            rows=self._on_disk, rows_dropped=self.rows_dropped,
+            lost_rows_by_reason=dict(self.lost_by_reason),
+            bad_rows=self.bad_rows, write_errors=self.write_errors,
         )
+        fd, self._meta_fd = self._meta_fd, -1
+        reserve = self.directory / META_RESERVE_FILE
         try:
-            _write_json(self.directory / META_FILE, self.meta)
-        except OSError as exc:
+            data = _json_bytes(self.meta)
+            _pwrite_all(fd, memoryview(data), 0)
+            os.ftruncate(fd, len(data))
+            os.fsync(fd)
+            os.replace(reserve, self.directory / META_FILE)
+        except (OSError, TypeError, ValueError) as exc:
+            self.meta_error = _why(exc) if isinstance(exc, OSError) else str(exc)
             log.warning("flight log meta.json not updated", path=str(self.directory),
-                        error=str(exc))
+                        error=self.meta_error)
+            with contextlib.suppress(OSError):
+                reserve.unlink()
+        finally:
+            os.close(fd)
 
     def __enter__(self) -> FlightRecorder:
         return self
