@@ -600,6 +600,11 @@ class SafetyConfig(ConfigModel):
     # what leaving the volume does (the estimate or Vicon outside safety.volume_x/y/z):
     # hand back to the pilot at once by default, as PX4's geofence "return to the pilot"
     # action: a vehicle that left the volume is beyond what the controller was trusted with
+    on_overruled: Literal["handback", "land"] = "handback"
+    # what an estimate proven wrong does (Vicon poses that agree with each other re-anchored
+    # it: a thrust fault or a knock the IMU could not measure): hand back at once, or land
+    # on the re-anchored estimate (a forged stream that outlived the real one would then
+    # fly the landing)
     on_second_stream: Literal["land", "hold"] = "land"
     # what a second Vicon pose stream for our object does (another sender, a misconfigured
     # Tracker): land, or hold position until it stops (landing if it lasts vicon_loss_land_s)

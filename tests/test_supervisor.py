@@ -437,9 +437,11 @@ def test_a_landing_on_dead_reckoning_alone_is_not_confirmed_and_is_handed_back()
     t = land_from_1m(sup)
     blind = {"vicon_age_s": 3.0, "position": (0.0, 0.0, -0.01), "height_above_ground_m": 0.01,
              "lift_fraction": 0.95, "specific_force_g": 1.0}
-    for dt in (0.1, 0.7, 1.5, 2.55):
+    lim = sup.limits
+    wait = lim.landed_time_s + lim.landing_confirm_s  # from the first tick at the floor
+    for dt in (0.1, 0.7, 1.5, 0.05 + wait):
         assert sup.update(obs(t + dt, **blind)) is State.LAND
-    assert sup.update(obs(t + 2.65, **blind)) is State.HANDBACK
+    assert sup.update(obs(t + 0.15 + wait, **blind)) is State.HANDBACK
     assert "landing not confirmed" in sup.transitions[-1].reason
     assert sup.transitions[-1].failsafe and not any(
         tr.new is State.DISARM for tr in sup.transitions)
@@ -462,12 +464,24 @@ def test_floor_contact_counts_only_near_the_floor(height: float, vicon_age: floa
     assert end is (State.DISARM if disarmed else State.LAND)
 
 
-def test_an_estimate_overruled_by_vicon_lands() -> None:
+WHY = "3 consistent Vicon poses disagreed with the estimate for 0.30 s"
+
+
+def test_an_estimate_overruled_by_vicon_hands_back_by_default() -> None:
     sup = Supervisor()
     t = airborne(sup)
-    why = "3 consistent Vicon poses disagreed with the estimate for 0.30 s"
-    assert sup.update(obs(t + 0.1, overruled=why, **FLYING_AT_1M)) is State.LAND
-    assert sup.transitions[-1].failsafe and why in sup.transitions[-1].reason
+    assert sup.update(obs(t + 0.1, overruled=WHY, **FLYING_AT_1M)) is State.HANDBACK
+    assert sup.transitions[-1].failsafe and WHY in sup.transitions[-1].reason
+
+
+def test_an_estimate_overruled_by_vicon_lands_when_configured_and_a_landing_goes_on() -> None:
+    sup = Supervisor(SupervisorLimits(on_overruled="land"))
+    t = airborne(sup)
+    assert sup.update(obs(t + 0.1, overruled=WHY, **FLYING_AT_1M)) is State.LAND
+    assert sup.transitions[-1].failsafe and WHY in sup.transitions[-1].reason
+    default = Supervisor()
+    t = land_from_1m(default)
+    assert default.update(obs(t + 0.1, overruled=WHY, **FLYING_AT_1M)) is State.LAND
 
 
 def test_a_reference_fault_lands() -> None:

@@ -105,6 +105,7 @@ def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
         min_vicon_rate_hz=config.vicon.min_rate_hz, on_signal=s.on_signal,
         battery_land_v=s.battery_land_v, battery_grace_s=s.battery_grace_s,
         pilot_grace_s=pilot_grace_s(config), on_geofence=s.on_geofence,
+        on_overruled=s.on_overruled,
         on_second_stream=s.on_second_stream, landing_confirm_s=s.landing_confirm_s,
     )
 

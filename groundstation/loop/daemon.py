@@ -79,7 +79,7 @@ from groundstation.errors import LinkError
 from groundstation.logs import log_through_sink
 from groundstation.loop.api import LoopInbox, MotionApi
 from groundstation.loop.core import FlightCore, TickResult
-from groundstation.loop.inputs import DataFrontEnd, VehicleStatus
+from groundstation.loop.inputs import DataFrontEnd, VehicleStatus, with_vicon
 from groundstation.loop.planner import settings_from_config
 from groundstation.loop.planner_process import PlannerProcess
 from groundstation.loop.realtime import (
@@ -356,7 +356,8 @@ class FlightDaemon:
                 link.start_stream()  # the stream stopped: ask for it again
                 clock.last_config = start
         vicon_rate, vicon_age = io.vicon.rate_and_age()
-        health = self._front.health(start, vicon_age, vicon_rate)
+        health = with_vicon(self._front.health(start, vicon_age, vicon_rate),
+                            io.vicon.evidence(), io.vicon.diagnosis)
         result = core.tick(start, imu, poses, self._front.status, health, self.stop_requests)
         self._last = result
         clock.t_prev = start

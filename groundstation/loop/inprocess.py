@@ -14,7 +14,6 @@ Used by the tests and the virtual lab's evaluation suite (``gs eval --fast``).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -29,7 +28,7 @@ from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
 from groundstation.lab import Lab, virtual_lab
 from groundstation.loop.core import FlightCore, TickResult
-from groundstation.loop.inputs import DataFrontEnd
+from groundstation.loop.inputs import DataFrontEnd, with_vicon
 from groundstation.loop.recorder import FlightRecorder
 from groundstation.loop.supervisor import State, Transition
 from groundstation.loop.ticklog import TickLogger
@@ -110,7 +109,6 @@ class InProcessFlight:
         self._poses = PoseFilter.from_config(config.vicon, config.safety)
         self._period = config.serial.data_period_ms / 1000.0
         self.stop_requests = 0
-        self._vicon_last: tuple[float, float, float] | None = None
         self.trace = FlightTrace()
         self.compute_times: list[float] = []
         """Wall time of each FlightCore.tick [s]: the code's back-to-back cost."""
@@ -132,9 +130,6 @@ class InProcessFlight:
             pose = self._poses.process(datagram.data, datagram.t)
             if pose is not None:
                 out.append(pose)
-        if out:
-            p = out[-1].position
-            self._vicon_last = (float(p[0]), float(p[1]), float(p[2]))
         return out
 
     def step(self) -> None:
@@ -152,9 +147,8 @@ class InProcessFlight:
     def _tick(self, t: float, msg: DataMsg | None, poses: Sequence[Pose]) -> None:
         imu = self._front.receive(t, msg) if msg is not None else None
         rate = self._poses.rate
-        health = dataclasses.replace(
-            self._front.health(t, rate.time_since_pose(t), rate.rate(t)),
-            vicon_last=self._vicon_last)
+        health = with_vicon(self._front.health(t, rate.time_since_pose(t), rate.rate(t)),
+                            self._poses.evidence(t), self._poses.diagnosis)
         start = time.perf_counter()
         result = self.core.tick(t, imu, poses, self._front.status, health, self.stop_requests)
         compute = time.perf_counter() - start

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -21,7 +21,7 @@ from groundstation.config import GroundStationConfig
 from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.model.sensors import AxisScaling, ImuScaling
 from groundstation.types import ImuSample, Sticks
-from groundstation.vicon.health import RateMonitor
+from groundstation.vicon.health import RateMonitor, ViconEvidence
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,6 +66,14 @@ class InputHealth:
     vicon_outside: tuple[float, float, float] | None = None
     vicon_rivals: int = 0
     vicon_diagnosis: Callable[[], str] | None = None
+
+
+def with_vicon(health: InputHealth, evidence: ViconEvidence,
+               diagnosis: Callable[[], str]) -> InputHealth:
+    """``health`` with what the pose stream says beyond its poses (:class:`ViconEvidence`)
+    and the pose filter's one-line ``diagnosis`` for a preflight failure."""
+    return replace(health, vicon_last=evidence.last_position, vicon_outside=evidence.outside,
+                   vicon_rivals=evidence.rivals, vicon_diagnosis=diagnosis)
 
 
 def _vec3(values: list[float]) -> tuple[float, float, float]:

@@ -17,7 +17,9 @@ States and transitions::
       a second Vicon pose stream for the object -> LAND (on_second_stream: land) or HOLD
                                                   until it stops
       Vicon poses overruled the estimate (it was wrong and was re-anchored on them)
-                                               -> LAND
+                                               -> HANDBACK (on_overruled: handback, the
+                                                  default) or LAND; while landing, the
+                                                  landing goes on re-anchored
       the reference asks more than the feasibility check allowed -> LAND
       Vicon silent > vicon_loss_hold_s         -> HOLD (hold position on the IMU estimate)
       HOLD and Vicon back                      -> the state HOLD interrupted
@@ -137,6 +139,10 @@ class SupervisorLimits:
     """... for this long [s]; below it at preflight refuses the take-off."""
     on_geofence: str = "handback"
     """What leaving the volume does: "handback" (at once) or "land"."""
+    on_overruled: str = "handback"
+    """What an estimate proven wrong by Vicon does: "handback" or "land" (on it, re-anchored:
+    right if the poses are the truth, wrong if they are a forgery that outlived the real
+    stream, which is why the pilot gets the vehicle by default)."""
     on_second_stream: str = "land"
     """What a second Vicon pose stream for the object does: "land" or "hold"."""
     landing_confirm_s: float = 5.0
@@ -415,7 +421,8 @@ class Supervisor:
         if self.state is State.LAND:
             return None
         if obs.overruled:
-            return State.LAND, f"estimate was wrong: {obs.overruled}"
+            return (State.HANDBACK if lim.on_overruled == "handback" else State.LAND), \
+                f"estimate was wrong: {obs.overruled}"
         if obs.reference_fault:
             return State.LAND, f"reference fault: {obs.reference_fault}"
         if obs.vicon_rivals > 0:
