@@ -45,6 +45,9 @@ class SimViconConfig(ConfigModel):
     rate_hz: PositiveFloat = 100.0  # thesis lab 100 Hz; Ch. 11.1 also flew 10 and 1 Hz
     latency_s: NonNegFloat = 0.005  # matches vicon.latency_s default
     noise: bool = True  # Table 6.1 variances from the vehicle section
+    angle_noise: bool = True
+    # false: exact angles, noise on the position only, as a simulator's Vicon sender (a
+    # level vehicle at heading 0 reports rotation exactly (0, 0, 0))
     loss_encoding: Literal["missing", "zero", "held-identity"] = "held-identity"
     # spec "lost tracking" encodings; held-identity is the thesis lab's (Alg. 2)
     outages: list[tuple[float, float]] = Field(default_factory=list)  # (start_s, duration_s)

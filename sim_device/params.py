@@ -269,6 +269,7 @@ class ViconSimParams:
     rate_hz : datagrams per second (any rate; the thesis used 100, 10 and 1)
     latency : delay from the pose instant to delivery [s]
     noise : add Table 6.1 noise (variances below)
+    angle_noise : with ``noise``, on the attitude too (False: exact angles, noisy position)
     position_variance : (3,) NED [m^2]; quaternion_variance : (4,) q0..q3 [-]
     loss_encoding : how lost tracking is sent (spec "lost tracking" 1-3)
     outages : (start, duration) [s] windows without tracking
@@ -284,6 +285,7 @@ class ViconSimParams:
     rate_hz: float = _SIM.vicon.rate_hz
     latency: float = _SIM.vicon.latency_s
     noise: bool = _SIM.vicon.noise
+    angle_noise: bool = _SIM.vicon.angle_noise
     position_variance: Vec3 = VICON_POSITION_VARIANCE_TABLE_6_1
     quaternion_variance: tuple[float, float, float, float] = VICON_QUATERNION_VARIANCE_TABLE_6_1
     loss_encoding: LossEncoding = _SIM.vicon.loss_encoding
@@ -429,7 +431,7 @@ def _imu_params(config: GroundStationConfig, sim: SimConfig) -> ImuParams:
 def _vicon_params(config: GroundStationConfig, sim: SimConfig) -> ViconSimParams:
     sv, vc = sim.vicon, config.vicon
     return ViconSimParams(
-        rate_hz=sv.rate_hz, latency=sv.latency_s, noise=sv.noise,
+        rate_hz=sv.rate_hz, latency=sv.latency_s, noise=sv.noise, angle_noise=sv.angle_noise,
         position_variance=_vec3(config.vehicle.vicon_position_variance),
         quaternion_variance=_vec4(config.vehicle.vicon_quaternion_variance),
         loss_encoding=sv.loss_encoding,

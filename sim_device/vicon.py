@@ -172,7 +172,8 @@ class VirtualVicon:
         if self.noise:
             n = self._rng.standard_normal(7)
             pos = [pos[i] + self._pos_sigma[i] * n[i] for i in range(3)]
-            q = [q[i] + self._q_sigma[i] * n[3 + i] for i in range(4)]
+            if self.params.angle_noise:
+                q = [q[i] + self._q_sigma[i] * n[3 + i] for i in range(4)]
         return self._conv.to_vicon(pos, q)
 
     @property

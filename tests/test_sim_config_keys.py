@@ -51,6 +51,7 @@ CHANGES: dict[str, Any] = {
     "vicon.rate_hz": 10.0,
     "vicon.latency_s": 0.01,
     "vicon.noise": False,
+    "vicon.angle_noise": False,
     "vicon.loss_encoding": "zero",
     "vicon.outages": [[1.0, 2.0]],
     "vicon.tilt_limit_deg": 45.0,

@@ -345,7 +345,7 @@ class FlightCore:
         diverged = est is not None and self.ekf.diverged
         settled = (self._t_init is not None and est is not None
                    and est.t - self._t_init >= self._settle_s)
-        gravity_ok = bool(self.init_report is not None and self.init_report.gravity_ok)
+        gravity_ok = None if self.init_report is None else bool(self.init_report.gravity_ok)
         position = self._position()
         tilt = 0.0
         if est is not None:

@@ -165,7 +165,8 @@ class Observation:
     vicon_rate_hz : measured Vicon pose rate
     estimator_ok : estimator initialised and its covariance converged
     estimator_diverged : covariance trace over its limit or non-finite state
-    gravity_ok : accelerometer gravity agrees with the Vicon attitude (frame check)
+    gravity_ok : accelerometer gravity agrees with the Vicon attitude (frame check; None
+        before the estimator has started, when nothing could be checked)
     position : (x, y, z) estimate
     tilt_rad : angle between body z and earth z
     height_above_ground_m : ground z minus z (positive when airborne)
@@ -202,7 +203,7 @@ class Observation:
     vicon_rate_hz: float
     estimator_ok: bool
     estimator_diverged: bool
-    gravity_ok: bool
+    gravity_ok: bool | None
     position: tuple[float, float, float]
     tilt_rad: float
     height_above_ground_m: float
@@ -479,7 +480,7 @@ class Supervisor:
                             f"{lim.min_vicon_rate_hz:.0f} needed)")
         if not obs.estimator_ok:
             failures.append("estimator not converged")
-        if not obs.gravity_ok:
+        if obs.gravity_ok is False:
             failures.append("accelerometer gravity disagrees with the Vicon attitude "
                             "(check vicon.world_to_ned / body_to_object)")
         if not self._inside(obs.position):
