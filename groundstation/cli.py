@@ -101,9 +101,86 @@ def check_config(file: Annotated[Path, typer.Argument(help="YAML configuration f
     try:
         config = _checked_config(file)
         FlightCore(config)
+        lines = _trajectory_check(config)[0] if config.trajectory.name != "none" else []
     except (GroundStationError, ValueError, ArithmeticError) as exc:
         raise _fail(str(exc), 2) from exc
     typer.echo(dump_config(config), nl=False)
+    for line in lines:  # YAML comments: the output stays a configuration file
+        typer.echo(f"# {line}")
+
+
+def _trajectory_overrides(target: str) -> dict[str, Any]:
+    """``trajectory.*`` overrides for a ``--trajectory`` value: a ``.csv`` (or an existing
+    file) is a trajectory file (waypoints or polynomial segments), anything else a name."""
+    if Path(target).suffix.lower() == ".csv" or Path(target).is_file():
+        return {"trajectory.name": "waypoints", "trajectory.file": target}
+    return {"trajectory.name": target}
+
+
+def _trajectory_check(config: GroundStationConfig) -> tuple[list[str], Any]:
+    """The lines of ``config``'s trajectory check (:mod:`groundstation.control.summary`)
+    and the prepared trajectory; TrajectoryError if it cannot be built."""
+    from groundstation.control.summary import check_lines
+    from groundstation.loop.assemble import (
+        flight_limits_from_config,
+        prepare_trajectory,
+        volume_from_config,
+    )
+
+    prepared = prepare_trajectory(config)
+    lines = check_lines(prepared.trajectory.name, prepared.description, prepared.duration_s,
+                        prepared.report, flight_limits_from_config(config),
+                        volume_from_config(config))
+    return lines, prepared
+
+
+@app.command("trajectory")
+def trajectory_command(
+    target: Annotated[str, typer.Argument(
+        help="A trajectory file (waypoint CSV t,x,y,z[,yaw] or a uav_trajectories / "
+             "Crazyswarm polynomial CSV) or a trajectory name (square, figure-eight, ...).")],
+    config: Annotated[Path | None, typer.Option(
+        "--config", "-c", help="YAML configuration (limits, volume, centre); default: the "
+        "built-in defaults.")] = None,
+    plot: Annotated[Path | None, typer.Option(
+        help="Draw it into this PNG: top view, speed and tilt over time with the limits.")]
+        = None,
+) -> None:
+    """Check a trajectory as `gs fly` would fly it, without flying: what it was taken to be
+    (dense samples fitted with a curve, corners, polynomial segments), its peaks (speed,
+    acceleration, jerk, tilt, tilt rate, yaw rate, lift, extent) against the limits, and
+    the verdict. Exit 0 if it is flyable, 2 if it is refused or cannot be read."""
+    from groundstation.config import validate_config
+
+    if target == "none":
+        raise _fail("trajectory none: flown by run-time commands (gs goto ...), each "
+                    "checked when it is asked for", 2)
+    overrides = _trajectory_overrides(target)
+    try:
+        cfg = _checked_config(config, overrides) if config is not None else \
+            apply_overrides(validate_config({}), overrides)
+        if config is None:
+            check_files(cfg, "<defaults>")
+        lines, prepared = _trajectory_check(cfg)
+    except (GroundStationError, ValueError, ArithmeticError) as exc:
+        raise _fail(str(exc), 2) from exc
+    for line in lines:
+        typer.echo(line)
+    if plot is not None:
+        from groundstation.evaluation.trajectory_figure import trajectory_figure
+        from groundstation.loop.assemble import flight_limits_from_config, volume_from_config
+
+        try:
+            trajectory_figure(prepared.trajectory, prepared.duration_s,
+                              flight_limits_from_config(cfg), volume_from_config(cfg), plot,
+                              title=f"{target}: top view")
+            typer.echo(f"figure: {plot}")
+        except GroundStationError as exc:  # matplotlib missing: the check still counts
+            typer.echo(f"no figure: {exc}", err=True)
+        except OSError as exc:
+            raise _fail(f"{plot}: cannot write the figure: {exc.strerror}", 2) from exc
+    if not prepared.report.feasible:
+        raise typer.Exit(2)
 
 
 @app.command()
@@ -114,8 +191,8 @@ def fly(
     vicon_object: Annotated[str | None, typer.Option(help="Vicon object name.")] = None,
     trajectory: Annotated[str | None, typer.Option(
         help="hover|step-x|step-y|step-z|square|yz-rectangle|low-hover|figure-eight|"
-             "yaw-turn, "
-             "or a waypoint CSV file.")] = None,
+             "yaw-turn|none, or a trajectory file: a waypoint CSV (t,x,y,z[,yaw]) or a "
+             "uav_trajectories / Crazyswarm polynomial CSV (see `gs trajectory`).")] = None,
     controller: Annotated[str | None, typer.Option(help="lqr-ff|lqr-cv|lqr-cp|pid|hinf")] = None,
     duration: Annotated[float | None, typer.Option(
         help="Seconds on the trajectory before landing (default: one period).")] = None,
@@ -150,11 +227,8 @@ def fly(
         "controller.type": controller, "serial.protocol": protocol,
         "logging.flight_log_dir": str(log_dir) if log_dir else None,
     }
-    if trajectory is not None and Path(trajectory).suffix.lower() == ".csv":
-        overrides["trajectory.name"] = "waypoints"
-        overrides["trajectory.file"] = trajectory
-    else:
-        overrides["trajectory.name"] = trajectory
+    overrides.update(_trajectory_overrides(trajectory) if trajectory is not None
+                     else {"trajectory.name": None})
     cfg = load(config, overrides)
     from groundstation.loop.flight import fly_command
 

@@ -47,7 +47,7 @@ BAD_FILES: list[tuple[bytes, str]] = [
      ":5: vicon: duplicate key (first at line 1"),
     (b"vicon:\n  port: 51001\n  object_name: X3D\n  port: 51002\n",
      ":4: vicon.port: duplicate key (first at line 2"),
-    (b"serial:\n  port: /dev/tty\xff\xfe\n", ":2: not UTF-8 text (byte 0xff)"),
+    (b"serial:\n  port: /dev/tty\xff\xfe\n", ":2:17: not UTF-8 text (byte 0xff)"),
     (b"", "empty"),
     (b"# only a comment\n\n", "empty"),
     (b"vicon: {}\n---\nserial: {}\n", "not valid YAML: expected a single document"),
@@ -71,7 +71,8 @@ BAD_FILES: list[tuple[bytes, str]] = [
      "telemetry.control_server_key: 'KEYS/server.key': no secret key"),
     (f"telemetry:\n  control_server_key: {KEYS}/server.key_secret\n"
      f"  control_client_keys: {KEYS}/clients/alice.key\n".encode(),
-     "telemetry.control_client_keys: 'KEYS/clients/alice.key': not a directory"),
+     "telemetry.control_client_keys: 'KEYS/clients/alice.key': names a regular file, not a "
+     "directory"),
     (f"telemetry:\n  control_server_key: {KEYS}/server.key_secret\n".encode(),
      "telemetry.control_client_keys: None: control_server_key and control_client_keys go "
      "together"),

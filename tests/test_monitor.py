@@ -61,7 +61,8 @@ def state(**extra: Any) -> dict[str, Any]:
 def health() -> dict[str, Any]:
     return {**health_payload(
         link={"rate_hz": 99.5, "rejected": {"crc": 2, "length": 1}, "time_since_data_s": 0.01},
-        vicon={"rate_hz": 100.0, "rejected": {}, "time_since_pose_s": None},
+        vicon={"rate_hz": 100.0, "rejected": {}, "time_since_pose_s": None,
+               "rivals": 1, "rival_events": 2, "rival_poses": 246, "outside": 0},
         estimator={"t": 5.0, "initialised": True, "updates": 1234, "last_nis": 2.31,
                    "time_since_fix": 0.012, "gated": 4, "resets": 0},
         loop={"ticks": 8344, "compute_time_s": 0.0011}),
@@ -94,6 +95,8 @@ def test_render_shows_the_view() -> None:
     assert line(lines, "link") == (
         "link        99.5 Hz  last  0.01 s  rejected 3 (crc 2, length 1)")
     assert line(lines, "vicon") == "vicon      100.0 Hz  last    -- s  rejected 0"
+    assert line(lines, "streams") == (
+        "streams   RIVAL STREAM x1  rival episodes 2  rival poses 246  outside 0")
     # zero counters and the filter time are left out
     assert line(lines, "estimator") == "estimator updates 1234  NIS   2.3  fix  0.01 s  gated 4"
     assert line(lines, "loop") == "loop      ticks 8344  compute_time 0.0011 s"
@@ -110,6 +113,12 @@ def test_render_marks_missing_stale_and_handed_back() -> None:
     assert line(render(older, health()), "state").endswith("flight --:--.-")
     waiting = render(None, None)
     assert "waiting for telemetry" in waiting[0] and len(waiting) == HEIGHT
+    assert line(waiting, "streams") == "streams   --"
+    one = health()
+    one["vicon"] = {**one["vicon"], "rivals": 0, "rival_events": 0, "rival_poses": 0,
+                    "outside": 12}
+    assert line(render(state(), one), "streams") == (
+        "streams   one sender  rival episodes 0  rival poses 0  outside 12")
     assert line(waiting, "position") == (
         "position  x      --  y      --  z      -- m    (estimate, NED)")
     assert "NO DATA for 3.0 s" in render(state(), health(), age_s=3.0)[0]
@@ -211,7 +220,8 @@ states = section(
 healths = section(
     schema=number,
     link=section(rate_hz=number, rejected=st.one_of(counts, number), time_since_data_s=number),
-    vicon=section(rate_hz=number, rejected=counts, time_since_pose_s=number),
+    vicon=section(rate_hz=number, rejected=counts, time_since_pose_s=number, rivals=number,
+                  rival_events=number, rival_poses=number, outside=number),
     estimator=st.one_of(section(initialised=number, diverged=number, updates=number,
                                 last_nis=number, time_since_fix=number), counts),
     loop=counts, telemetry=section(sent=number, dropped=number, errors=number))

@@ -179,3 +179,57 @@ def test_from_config(sender: socket.socket) -> None:
     assert pose is not None
     assert pose.t == pytest.approx(7.0 - cfg.latency_s)
     np.testing.assert_allclose(pose.position, [0.0, -0.2, -1.0], atol=1e-15)
+
+
+class Steps:
+    """A clock that advances 5 ms per call (thread-safe): the reader's stamp per datagram
+    and each evidence() call, whatever the machine's speed."""
+
+    def __init__(self) -> None:
+        self._t = 0.0
+        self._lock = threading.Lock()
+
+    def __call__(self) -> float:
+        with self._lock:
+            self._t += 0.005
+            return self._t
+
+
+def test_evidence_and_diagnosis_over_udp(sender: socket.socket) -> None:
+    """Tracker's noise-free-angle stream (rotation exactly 0, position noisy) from one
+    socket, a forger 0.5 m off from another, interleaved: the real stream is followed and
+    passed, the forger is a rival (evidence, diagnosis), and the counters outlive close()."""
+    rng = np.random.default_rng(9)
+    zero = (0.0, 0.0, 0.0)
+
+    def item(frame: int, x_mm: float) -> bytes:
+        x, y, z = np.array([x_mm, 200.0, 1000.0]) + rng.normal(0.0, 0.65, 3)
+        body = struct.pack("<IB", frame, 1) + struct.pack("<BH24s6d", 0, 72, b"quad",
+                                                          x, y, z, *zero)
+        return body.ljust(1024, b"\0")
+
+    with (socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as forger,
+          ViconClient("127.0.0.1", 0, "quad", latency_s=0.0, clock=Steps()) as client):
+        last = b""
+        for k in range(21):
+            last = item(k + 1, 100.0)
+            sender.sendto(last, client.address)
+            if k < 20:
+                forger.sendto(item(900 + k, 600.0), client.address)
+        frames = []
+        while not frames or frames[-1] != 21:
+            pose = client.get(timeout=TIMEOUT)
+            assert pose is not None, frames
+            frames.append(pose.frame)
+        assert frames == list(range(3, 22))
+        evidence = client.evidence()
+        x, y, z = struct.unpack_from("<3d", last, 5 + 27)
+        assert evidence.last_position == pytest.approx((x / 1000, -y / 1000, -z / 1000),
+                                                       abs=1e-12)
+        assert (evidence.rivals, evidence.rival_events, evidence.outside) == (1, 1, None)
+    # Both senders start together: the real one, first, is followed at its third pose;
+    # alternations count from then on, so the forger's third and fourth are held back and
+    # its fifth (after five alternations) is a rival's.
+    assert client.diagnosis() == (
+        "41 datagrams, 19 poses of 'quad' passed; refused: 1 inconsistent, 5 unconfirmed, "
+        "16 from a rival stream")

@@ -202,6 +202,10 @@ class PolySet:
     def bounds(self) -> PieceBounds:
         """From the Taylor expansion about each segment's middle: on ``|tau - mid| <= h/2``
         the r-th derivative is at most ``sum_k |p^(r+k)(mid)| (h/2)^k / k!`` per axis."""
+        with np.errstate(over="ignore", invalid="ignore"):  # huge: refused as not finite
+            return self._bounds()
+
+    def _bounds(self) -> PieceBounds:
         coef = self.coef
         m, k1, _ = coef.shape
         half = 0.5 * (self.end - self.start)

@@ -278,10 +278,16 @@ def _report(r: Reading, lim: FlightLimits, volume: Volume | None) -> Feasibility
 
 
 # ------------------------------------------------------------------ refusals
+def _m(v: float) -> str:
+    """A coordinate [m] to the centimetre, without a minus sign on zero."""
+    text = f"{v:.2f}"
+    return "0.00" if text == "-0.00" else text
+
+
 def _at(pk: Peak) -> str:
     """The start of a refusal line: the time and the point."""
     x, y, z = pk.position
-    return f"at t = {pk.t:.2f} s, ({x:.2f}, {y:.2f}, {z:.2f}) m: "
+    return f"at t = {pk.t:.2f} s, ({_m(x)}, {_m(y)}, {_m(z)}) m: "
 
 
 def _how_many(pk: Peak) -> str:

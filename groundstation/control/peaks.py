@@ -35,7 +35,8 @@ decides (a curve so wild is refused rather than checked for ever)."""
 # ------------------------------------------------------------------ the quantities
 @dataclass(frozen=True, slots=True)
 class Vehicle:
-    """m [kg], g [m/s^2], I_i [N s/m] of the point-mass inversion."""
+    """m [kg], g [m/s^2], I_i [N s/m] of the point-mass inversion (build from
+    :class:`~groundstation.control.feasibility.FlightLimits` fields)."""
 
     m: float
     g: float
@@ -55,11 +56,13 @@ class Vehicle:
 
 
 def norm(x: FloatArray) -> FloatArray:
+    """(n,) Euclidean norms of the rows of ``x`` (n, d)."""
     out: FloatArray = np.linalg.norm(x, axis=1)
     return out
 
 
-def _tilt(veh: Vehicle, s: Samples) -> FloatArray:
+def tilt_angle(veh: Vehicle, s: Samples) -> FloatArray:
+    """(n,) tilt [rad] the references ``s`` need: the angle of ``-F`` from the vertical."""
     f = veh.force(s)
     lift = norm(f)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -67,7 +70,8 @@ def _tilt(veh: Vehicle, s: Samples) -> FloatArray:
     return np.where(lift > 0.0, out, math.pi)
 
 
-def _tilt_rate(veh: Vehicle, s: Samples) -> FloatArray:
+def tilt_rate_of(veh: Vehicle, s: Samples) -> FloatArray:
+    """(n,) rate [rad/s] at which the thrust direction turns, ``|F x F'| / |F|^2``."""
     f = veh.force(s)
     lift2 = np.sum(f * f, axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -134,8 +138,8 @@ QUANTITIES: tuple[_Quantity, ...] = (
               lambda v, b, f, h: _lift_slope(v, b), 1e-3),
     _Quantity("lift_min", lambda v, s: -norm(v.force(s)),
               lambda v, b, f, h: _lift_slope(v, b), 1e-3),
-    _Quantity("tilt", _tilt, _tilt_slope, 1e-5),
-    _Quantity("tilt_rate", _tilt_rate, _tilt_rate_slope, 1e-3),
+    _Quantity("tilt", tilt_angle, _tilt_slope, 1e-5),
+    _Quantity("tilt_rate", tilt_rate_of, _tilt_rate_slope, 1e-3),
 )
 _BY_NAME = {q.name: q for q in QUANTITIES}
 

@@ -124,10 +124,12 @@ class MinJerkPath(PiecewisePolynomial):
                 coef[i, k, :3] = c * direction[i]
             coef[i, [1, 3, 4, 5], 3] = (psi.v0, psi.c3, psi.c4, psi.c5)
         coef[:, 0, :3], coef[:, 0, 3] = p[:-1], yaws[:-1]
-        corners = int(np.count_nonzero(v[1:-1] == 0.0)) if len(v) > 2 else 0
+        corners = int(np.count_nonzero(v[:-1] == 0.0) if periodic
+                      else np.count_nonzero(v[1:-1] == 0.0))
+        ends = "a closed loop" if periodic else "from rest to rest"
         super().__init__(t, coef, periodic=periodic, free_heading=free_heading, name=name,
-                         description=f"corners: {t.size} knots along straight min-jerk "
-                         f"segments, {corners} corners passed at rest")
+                         description=f"corners: {t.size} knots joined by straight min-jerk "
+                         f"segments, {ends}, {corners} corners passed at rest")
         self.times, self.points, self.yaws = t, p, yaws
 
 

@@ -157,9 +157,10 @@ class SampleFit:
     def describe(self) -> str:
         """One line for people (millimetres, degrees)."""
         noise = "/".join(f"{1000 * s:.2f}" for s in self.noise_m)
-        return (f"dense samples ({self.samples} at {self.rate_hz:.0f} Hz; {self.rule.describe()})"
-                f" fitted with a quintic least-squares spline (knot intervals x/y/z/yaw "
-                f"{'/'.join(str(k) for k in self.intervals)}, chosen from the noise); noise "
+        return (f"dense samples: {self.samples} rows at {self.rate_hz:.0f} Hz, "
+                f"{self.rule.describe()}; fitted with a quintic least-squares spline (knot "
+                f"intervals x/y/z/yaw {'/'.join(str(k) for k in self.intervals)}, chosen "
+                f"from the noise); noise "
                 f"estimate x/y/z {noise} mm, yaw {math.degrees(self.noise_yaw_rad):.3f} deg; "
                 f"samples off the curve: {1000 * self.residual_rms_m:.3f} mm RMS, "
                 f"{1000 * self.residual_max_m:.3f} mm max, yaw "
@@ -174,6 +175,10 @@ class FittedPath(PiecewisePolynomial):
         super().__init__(breaks, coefficients, free_heading=free_heading, name=name,
                          description=fit.describe())
         self.fit = fit
+        self.sample_times: FloatArray = np.zeros(0)
+        """The samples' times (N,) [s] (for figures)."""
+        self.sample_points: FloatArray = np.zeros((0, 3))
+        """The samples (N, 3), NED [m]."""
 
 
 def fit_samples(times: FloatArray, points: FloatArray, yaws: FloatArray, *, rule: HopRule,
@@ -209,4 +214,6 @@ def fit_samples(times: FloatArray, points: FloatArray, yaws: FloatArray, *, rule
                     residual_yaw_max_rad=float(np.max(np.abs(off[:, 3]))),
                     intervals=(intervals[0], intervals[1], intervals[2], intervals[3]),
                     rule=rule)
-    return FittedPath(breaks - breaks[0], coef, fit, free_heading=free_heading, name=name)
+    path = FittedPath(breaks - breaks[0], coef, fit, free_heading=free_heading, name=name)
+    path.sample_times, path.sample_points = t.copy(), data[:, :3].copy()
+    return path

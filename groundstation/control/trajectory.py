@@ -122,6 +122,14 @@ class Hover:
         return Reference(t=t, position=p.copy(), velocity=np.zeros(3),
                          acceleration=np.zeros(3), yaw=self._yaw)
 
+    @property
+    def description(self) -> str:
+        """What it is, for people."""
+        if self.duration == 0.0:
+            return "a fixed point (closed form)"
+        return (f"a set-point step of {float(np.linalg.norm(self._p1 - self._p0)):.2f} m at "
+                f"{self._t_step:g} s, left as it is (the step response is the test)")
+
     def pieces(self, t0: float, t1: float) -> list[PieceSet]:
         """At rest; with a step, two pieces (the step is the jump between them)."""
         if self.duration == 0.0 or not t0 < self._t_step < t1:
@@ -256,6 +264,14 @@ class PiecewiseLinear:
         return Reference(t=t, position=pos, velocity=vel, acceleration=acc, yaw=yaw,
                          yaw_rate=yaw_rate)
 
+    @property
+    def description(self) -> str:
+        """What it is, for people."""
+        blend = f", corners blended over {self.smoothing_s:g} s" if self.smoothing_s else \
+            ", sharp corners"
+        return (f"raw corners (shaping none): {len(self._t)} knots joined by straight "
+                f"segments at constant speed{blend}")
+
     def pieces(self, t0: float, t1: float) -> list[PieceSet] | None:
         """The straight segments as degree-1 polynomials (laps unrolled if periodic, at
         rest outside an open path); None with corner smoothing (not described piecewise)."""
@@ -362,6 +378,12 @@ class FigureEight:
         return Reference(t=t, position=pos, velocity=vel, acceleration=acc, yaw=self._yaw,
                          jerk=jerk)
 
+    @property
+    def description(self) -> str:
+        """What it is, for people."""
+        return (f"closed form: a lemniscate {2 * self._a:g} m (east) x {self._a:g} m "
+                f"(north), {self.duration:g} s a lap")
+
     def peaks(self) -> tuple[float, float, float, float]:
         """Closed-form peaks over a lap: speed ``sqrt(2) a w`` (at the centre),
         acceleration ``17/8 a w^2`` (where ``sin^2(w t) = 17/32``), jerk ``sqrt(17) a w^3``
@@ -462,6 +484,12 @@ class YawTurn:
         s, ds, _, _ = smoothstep(t / self.duration)
         return Reference(t=t, position=self._c.copy(), velocity=np.zeros(3),
                          yaw=self._yaw + self._turn * s, yaw_rate=self._turn * ds / self.duration)
+
+    @property
+    def description(self) -> str:
+        """What it is, for people."""
+        return (f"closed form: a heading turn of {math.degrees(self._turn):g} deg over "
+                f"{self.duration:g} s (min-jerk), holding position")
 
     def critical_times(self, t0: float, t1: float) -> list[float]:
         """Mid-turn, where the heading rate peaks at ``15/8 turn / period``."""

@@ -36,7 +36,7 @@ from groundstation.telemetry.schema import SCHEMA_VERSION, TOPIC_HEALTH, TOPIC_S
 WIDTH = 79
 """Longest line drawn [characters]: one less than an 80-column terminal, so a line never
 wraps (a terminal that wraps at the last column would break the in-place redraw)."""
-HEIGHT = 15
+HEIGHT = 16
 """Lines in the view, whatever the payloads hold."""
 STALE_S = 1.0
 """No message for longer than this is shown as a warning [s]."""
@@ -216,6 +216,20 @@ def _source(section: Any) -> str:
     return text + f"  rejected {total}" + (f" ({detail})" if detail else "")
 
 
+def _streams(section: Any) -> str:
+    """The Vicon section's pose streams: ``one sender  rival episodes 0  rival poses 0
+    outside 0``, led by ``RIVAL STREAM x1`` while a second sender of the object is fed
+    (``rivals``); ``outside`` counts sightings beyond the volume. ``--`` without them."""
+    if not isinstance(section, Mapping) or "rivals" not in section:
+        return "--"
+    rivals = _real(section.get("rivals"))
+    head = ("--" if rivals is None else "one sender" if rivals == 0
+            else f"RIVAL STREAM x{_count(rivals)}")
+    return (f"{head}  rival episodes {_count(section.get('rival_events'))}  "
+            f"rival poses {_count(section.get('rival_poses'))}  "
+            f"outside {_count(section.get('outside'))}")
+
+
 def _free(section: Any, *, hide_zero: bool = False, skip: tuple[str, ...] = ()) -> str:
     """``key value`` pairs of a free-form section's scalar entries, with the unit its key
     names (``compute_time_s 0.0011`` -> ``compute_time 0.0011 s``); ``hide_zero`` leaves
@@ -313,8 +327,8 @@ def render(
     Supervisor state and flight time [mm:ss.s], position estimate, reference and yaw
     [m, deg], tracking error [cm], body velocity [m/s], attitude [deg], body rates
     [deg/s], command [RC units] and ctrl mask, vehicle (battery [V], switch), link and
-    Vicon rates [Hz], last data age [s] and rejections, estimator, loop and telemetry
-    counters.
+    Vicon rates [Hz], last data age [s] and rejections, Vicon's pose streams (a rival
+    sender, sightings outside the volume), estimator, loop and telemetry counters.
 
     state, health : the latest payloads of each topic (None if none yet); a state with
         ``final`` true is shown as the flight's end
@@ -346,6 +360,7 @@ def render(
         ("vehicle", _vehicle(_get(state, "vehicle"))),
         ("link", _source(_get(health, "link"))),
         ("vicon", _source(_get(health, "vicon"))),
+        ("streams", _streams(_get(health, "vicon"))),
         ("estimator", _estimator(_get(health, "estimator"))),
         ("loop", _free(_get(health, "loop")) or "--"),
         ("telemetry", _free(_get(health, "telemetry")) or "--"),

@@ -4,8 +4,9 @@ Data flow::
 
     UDP datagram -> decoder.decode_datagram -> ObjectPose (mm, Euler XYZ)
         -> PoseFilter (lost tracking, plausibility, frames.vicon_to_ned, pose streams with
-           their frame numbers and outlier gate, health)
+           their frame numbers, outlier gate and rivals, health)
         -> groundstation.types.Pose (NED m, q scalar first)
+           + ViconEvidence per tick (rival streams, sightings outside the volume)
 
 Only :class:`ViconClient` touches a socket; everything else is pure and testable
 with bytes. The byte layout is ``docs/vicon-udp.md``; the frame
@@ -28,7 +29,7 @@ from groundstation.vicon.frames import (
     ned_to_vicon,
     vicon_to_ned,
 )
-from groundstation.vicon.health import RateMonitor, ViconHealth
+from groundstation.vicon.health import RateMonitor, ViconEvidence, ViconHealth
 from groundstation.vicon.posefilter import FilterOptions, PoseFilter, filter_options
 
 __all__ = [
@@ -43,6 +44,7 @@ __all__ = [
     "PoseFilter",
     "RateMonitor",
     "ViconClient",
+    "ViconEvidence",
     "ViconFrame",
     "ViconHealth",
     "decode_datagram",

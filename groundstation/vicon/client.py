@@ -5,7 +5,9 @@ address and port, stamps each one with the monotonic receive time and feeds it t
 a :class:`PoseFilter` (decoding, frame bookkeeping, lost-tracking and outlier
 rejection, conversion to NED: see :mod:`.posefilter` and :mod:`.frames`). Poses
 come out through :meth:`ViconClient.get` (next pose, blocking) or
-:meth:`ViconClient.latest` (newest pose, non-blocking).
+:meth:`ViconClient.latest` (newest pose, non-blocking); :meth:`ViconClient.evidence`
+(rival streams, sightings outside the volume) and :meth:`ViconClient.diagnosis`
+read the filter under the same lock.
 
 Socket errors become :class:`groundstation.errors.ViconError` (``raise ... from``).
 A reader that fails does not die silently: its error is stored and raised, as a
@@ -29,7 +31,7 @@ import structlog
 from groundstation.errors import ViconError
 from groundstation.types import Pose
 from groundstation.vicon.frames import DEFAULT_BODY_TO_OBJECT, DEFAULT_WORLD_TO_NED
-from groundstation.vicon.health import ViconHealth
+from groundstation.vicon.health import ViconEvidence, ViconHealth
 from groundstation.vicon.posefilter import FilterOptions, PoseFilter, filter_options
 
 if TYPE_CHECKING:  # config is only needed by from_config; no import cycle at run time
@@ -107,7 +109,7 @@ class ViconClient:
         logger: structlog.typing.FilteringBoundLogger | None = None,
     ) -> ViconClient:
         """Build (not start) a client from the ``vicon:`` configuration section, with the
-        flight volume of the ``safety:`` section (poses outside it are implausible)."""
+        flight volume of the ``safety:`` section (poses outside it are never passed on)."""
         return cls(
             config.bind_address,
             config.port,
@@ -231,6 +233,20 @@ class ViconClient:
         with self._cond:
             self._check()
             return self.filter.health(self._clock())
+
+    def evidence(self) -> ViconEvidence:
+        """What the stream says now beyond the poses (:meth:`PoseFilter.evidence`): cheap,
+        for every loop tick. Raises ViconError if the reader failed."""
+        with self._cond:
+            self._check()
+            return self.filter.evidence(self._clock())
+
+    def diagnosis(self) -> str:
+        """One line: datagrams, poses passed and refusals by reason
+        (:meth:`PoseFilter.diagnosis`). Works after :meth:`close` too (the counters stay),
+        and never raises: it is what a failure message quotes."""
+        with self._cond:
+            return self.filter.diagnosis()
 
     # -- internals -------------------------------------------------------------
 

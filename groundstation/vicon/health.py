@@ -1,10 +1,13 @@
-"""Health of the Vicon input: measured pose rate, counters, rate-band warnings.
+"""Health of the Vicon input: measured pose rate, counters, rate-band warnings, evidence.
 
 The Vicon rate is measured, never assumed: the lab must fly anywhere from 10 to
 100 Hz and degrade, with a warning, down to 1 Hz (``docs/vicon-udp.md``).
 :class:`RateMonitor` counts accepted poses in a sliding window and logs a
 structlog warning when the rate leaves the configured band, at most once per
 ``warn_interval_s``. Sans-IO: every method takes the current monotonic time.
+:class:`ViconHealth` is the counters' snapshot (telemetry, ``gs monitor``, the
+preflight's :meth:`ViconHealth.diagnosis`); :class:`ViconEvidence` what the flight
+reads every tick beyond the poses.
 """
 
 from __future__ import annotations
@@ -47,10 +50,18 @@ class ViconHealth:
     outliers : poses that agreed with no stream (speed / rotation-rate gate)
     reanchors : streams confirmed after the first: after a gap, or a new sender
     rate_warnings : rate-band warnings logged
-    implausible_position : poses outside the plausible volume (or absurd raw values)
+    implausible_position : poses beyond the sighting range (absurd values; see
+        :mod:`.plausibility`)
     implausible_rotation : Euler angles beyond a turn, or not converting to a rotation
     unconfirmed : poses held back because their stream had fewer than
-        ``reanchor_poses`` consistent poses in a row (start-up, after a gap, new sender)
+        ``reanchor_poses`` consistent poses in a row (start-up, after a gap, new sender),
+        or was confirmed but neither followed nor a rival (yet)
+    outside : confirmed poses of the followed stream outside the plausible volume
+        (sightings of the vehicle beyond it; never passed on)
+    rivals : confirmed streams of the object fed at the same time as the followed one
+        (their poses alternating with its poses, see :mod:`.streams`), now (0: one sender)
+    rival_events : rival-stream episodes so far
+    rival_poses : confirmed poses of rival streams (never passed on)
     """
 
     rate_hz: float
@@ -74,11 +85,64 @@ class ViconHealth:
     implausible_position: int
     implausible_rotation: int
     unconfirmed: int
+    outside: int
+    rivals: int
+    rival_events: int
+    rival_poses: int
 
     @property
     def rejected_datagrams(self) -> int:
         """Total datagrams rejected whole by the decoder."""
         return sum(self.rejected.values())
+
+    def refusals(self) -> list[tuple[int, str]]:
+        """``(count, reason)`` for every way a datagram gave no pose, in pipeline order,
+        non-zero counts only; with :attr:`poses` they add up to :attr:`datagrams`."""
+        reasons = [
+            (self.rejected_datagrams, "malformed"),
+            (self.lost_missing, "without the object"),
+            (self.non_finite, "non-finite"),
+            (self.lost_zero, "all-zero lost tracking"),
+            (self.lost_held_identity, "held-identity lost tracking"),
+            (self.implausible_position, "beyond the sighting range"),
+            (self.implausible_rotation, "not a rotation"),
+            (self.outliers, "inconsistent"),
+            (self.unconfirmed, "unconfirmed"),
+            (self.duplicates, "duplicated"),
+            (self.reordered, "reordered"),
+            (self.rival_poses, "from a rival stream"),
+            (self.outside, "outside the volume"),
+        ]
+        return [(n, reason) for n, reason in reasons if n]
+
+    def diagnosis(self, object_name: str) -> str:
+        """One line for a person: ``412 datagrams, 0 poses of 'X3D' passed; refused: 411
+        held-identity lost tracking, 1 unconfirmed``."""
+        head = f"{self.datagrams} datagrams, {self.poses} poses of {object_name!r} passed"
+        refused = ", ".join(f"{n} {reason}" for n, reason in self.refusals())
+        return head + ("; refused: " + refused if refused else "; none refused")
+
+
+@dataclass(frozen=True, slots=True)
+class ViconEvidence:
+    """What the pose stream says at time ``now`` [s], beyond the poses themselves.
+
+    last_position : NED [m] of the newest pose passed on (None if none yet)
+    last_age_s : now minus the receive time of that pose [s] (inf if none)
+    outside : NED [m] of the newest confirmed sighting beyond the plausible volume, if it
+        is newer than the newest pose passed on and at most ``reanchor_after_s`` old;
+        else None
+    rivals : confirmed streams of our object other than the followed one that were fed
+        within the last ``reanchor_after_s`` at the same time as it (their poses
+        alternating with its poses, see :mod:`.streams`; 0: one sender)
+    rival_events : rival-stream episodes so far
+    """
+
+    last_position: tuple[float, float, float] | None
+    last_age_s: float
+    outside: tuple[float, float, float] | None
+    rivals: int
+    rival_events: int
 
 
 class RateMonitor:

@@ -6,29 +6,43 @@
 1. **Decode** (:mod:`.decoder`): a malformed datagram is counted and dropped.
 2. **Lost tracking** ("no measurement", counted by kind): the object is missing;
    a value is NaN or infinite; all six values are exactly 0.0 (Vicon SDK,
-   occluded object); or all three rotations are exactly 0.0 while the translation
-   equals the last one of a pose stream, or there is none yet (the thesis's lab,
-   Ch. 7.3.1, Algorithm 2).
+   occluded object); or the **held identity** of the thesis's lab (Ch. 7.3.1,
+   Algorithm 2): all three rotations exactly 0.0 with a *held* translation, exactly
+   the previous item's of this object or the last one of a pose stream. A first
+   pose with rotation exactly 0 is a pose (a level vehicle facing Vicon's x with
+   noise-free angles reads so); if the same values come again, it was the start of
+   a held run and is taken back (:meth:`.Streams.retract`).
 3. **Absolute plausibility** (:mod:`.plausibility`, counted): raw values within
-   the plausible volume's radius and one turn, checked before any conversion;
-   then the NED position inside the plausible volume (flight volume + margin) and
-   a unit quaternion. At start-up and after a gap as at any other time.
+   the sighting range's radius and one turn, checked before any conversion; then a
+   unit quaternion and the NED position inside the sighting range (the plausible
+   volume grown by ``SIGHTING_MARGIN_M``). At start-up and after a gap as at any
+   other time. A pose outside the plausible volume (flight volume + margin) but in
+   the sighting range goes on: it may be the vehicle leaving the volume.
 4. **Convert** (:mod:`.frames`) and stamp ``t = t_receive - latency_s`` (between
    the two halves of step 3).
 5. **Streams** (:mod:`.streams`): the pose joins the stream of poses it agrees
    with (speed / rotation-rate gate for their spacing, with slack for receive-time
    jitter and noise) or starts one; frame numbers are kept per stream and advanced
-   only by its poses. It is passed on once its stream holds ``reanchor_poses``
+   only by its poses. It counts once its stream holds ``reanchor_poses``
    consistent poses in a row: never one pose at start-up, after a gap longer than
-   ``reanchor_after_s`` or for a new sender.
+   ``reanchor_after_s`` or for a new sender. One confirmed stream is followed; a
+   confirmed stream fed at the same time (its poses alternating with the followed
+   one's) is a **rival** (a second sender: counted, logged once per episode as
+   ``vicon_rival_stream``, never passed on).
+6. **Pass on** a pose of the followed stream inside the plausible volume; one
+   outside it is a **sighting** (counted, kept for :meth:`PoseFilter.evidence`),
+   never a pose to fuse.
 
 Only datagrams that carry a usable pose of the followed object ever touch the frame
 bookkeeping; other objects' items and pose-less datagrams are counted and ignored.
 No arithmetic on a received number before it is known to be finite and bounded,
 so no datagram can make numpy warn (issue 14).
 
-Datagrams that stop are visible in :class:`ViconHealth` (rate, time since the
-last pose), and the rate leaving its band is logged by :class:`RateMonitor`.
+Datagrams that stop are visible in :class:`ViconHealth` (rate of the followed
+stream, time since the last pose), and the rate leaving its band is logged by
+:class:`RateMonitor`. :meth:`PoseFilter.evidence` is what the flight reads per
+tick beyond the poses (rivals, sightings outside the volume);
+:meth:`PoseFilter.diagnosis` says in one line why poses were refused.
 Not thread-safe: the client serialises calls.
 """
 
@@ -49,9 +63,16 @@ from groundstation.vicon.frames import (
     DEFAULT_WORLD_TO_NED,
     FrameConversion,
 )
-from groundstation.vicon.health import RateMonitor, ViconHealth
-from groundstation.vicon.plausibility import DEFAULT_VOLUME, POSITION, Box, Plausibility
-from groundstation.vicon.streams import Gate, Streams
+from groundstation.vicon.health import LOGGER_NAME, RateMonitor, ViconEvidence, ViconHealth
+from groundstation.vicon.plausibility import (
+    DEFAULT_VOLUME,
+    OUTSIDE,
+    POSITION,
+    ROTATION,
+    Box,
+    Plausibility,
+)
+from groundstation.vicon.streams import FOLLOWED, RIVAL, Gate, Streams
 
 if TYPE_CHECKING:  # config is only needed by from_config; no import cycle at run time
     from groundstation.config import SafetyConfig, ViconConfig
@@ -112,10 +133,11 @@ class PoseFilter:
     angle_slack : rotation always allowed [rad]
     reanchor_after_s : a link between two poses of a stream longer than this is a gap [s]
     reanchor_poses : consistent poses in a row before a stream's poses pass (>= 2)
-    plausible_volume : where a pose can be, NED [m] ((x_min, x_max), (y_min, y_max),
-        (z_min, z_max)); default: the configuration's flight volume grown by its margin
+    plausible_volume : where a pose may be passed on, NED [m] ((x_min, x_max),
+        (y_min, y_max), (z_min, z_max)); default: the configuration's flight volume grown
+        by its margin
     rate_window_s, min_rate_hz, max_rate_hz, warn_interval_s : see :class:`RateMonitor`
-    logger : structlog logger for the rate warning
+    logger : structlog logger for the rate and rival-stream warnings
     """
 
     def __init__(
@@ -174,6 +196,7 @@ class PoseFilter:
         self.reanchor_after_s = reanchor_after_s
         self.reanchor_poses = reanchor_poses
         self.decoder = DatagramDecoder()
+        self._log = logger if logger is not None else structlog.get_logger(LOGGER_NAME)
         self.rate = RateMonitor(
             window_s=rate_window_s,
             min_rate_hz=min_rate_hz,
@@ -188,6 +211,13 @@ class PoseFilter:
         )
         self.lost_missing = self.lost_zero = self.lost_held_identity = self.non_finite = 0
         self.implausible_position = self.implausible_rotation = self.poses = 0
+        self.outside = 0
+        self._rival_logged = 0  # the rival episode last logged
+        self._previous: tuple[float, float, float] | None = None  # the last item's translation
+        self._last: Pose | None = None  # the newest pose passed on
+        self._last_t = -math.inf  # its receive time [s]
+        self._sighting: Pose | None = None  # the newest sighting outside the volume
+        self._sighting_t = -math.inf  # its receive time [s]
 
     @classmethod
     def from_config(
@@ -226,6 +256,28 @@ class PoseFilter:
         """
         return self.rate.check(now), self.rate.time_since_pose(now)
 
+    def evidence(self, now: float) -> ViconEvidence:
+        """What the stream says at monotonic time ``now`` [s] beyond the poses: the newest
+        pose passed on, a newer sighting outside the volume, rival streams (see
+        :class:`ViconEvidence`). Cheap (a few comparisons), for every loop tick."""
+        last, sighting = self._last, self._sighting
+        outside = None
+        if (sighting is not None and self._sighting_t > self._last_t
+                and now - self._sighting_t <= self.reanchor_after_s):
+            outside = _xyz(sighting)
+        return ViconEvidence(
+            last_position=None if last is None else _xyz(last),
+            last_age_s=now - self._last_t,
+            outside=outside,
+            rivals=self.streams.rivals(now - self.latency_s),
+            rival_events=self.streams.rival_events,
+        )
+
+    def diagnosis(self) -> str:
+        """One line: datagrams received, poses of the object passed on, and how many were
+        refused for each reason (see :meth:`ViconHealth.diagnosis`)."""
+        return self._snapshot(math.nan, math.nan, 0).diagnosis(self.object_name)
+
     def health(self, now: float) -> ViconHealth:
         """Snapshot of rates and counters at monotonic time ``now`` [s].
 
@@ -233,11 +285,16 @@ class PoseFilter:
         datagrams stop arriving altogether.
         """
         rate = self.rate.check(now)
+        return self._snapshot(rate, self.rate.time_since_pose(now),
+                              self.streams.rivals(now - self.latency_s))
+
+    def _snapshot(self, rate: float, since: float, rivals: int) -> ViconHealth:
+        """The counters with this rate [Hz], time since the last pose [s] and rivals."""
         streams = self.streams
         return ViconHealth(
             rate_hz=rate,
             rate_in_band=self.rate.in_band,
-            time_since_pose_s=self.rate.time_since_pose(now),
+            time_since_pose_s=since,
             datagrams=self.decoder.datagrams,
             poses=self.poses,
             rejected=MappingProxyType(dict(self.decoder.rejected)),
@@ -256,6 +313,10 @@ class PoseFilter:
             implausible_position=self.implausible_position,
             implausible_rotation=self.implausible_rotation,
             unconfirmed=streams.unconfirmed,
+            outside=self.outside,
+            rivals=rivals,
+            rival_events=streams.rival_events,
+            rival_poses=streams.rival_poses,
         )
 
     def _measure(self, frame: ViconFrame, t_receive: float) -> Pose | None:
@@ -270,32 +331,66 @@ class PoseFilter:
         if reason is None:
             position, quaternion = self.frames.to_ned(obj.translation, obj.rotation)
             reason = self.plausibility.converted(position, quaternion)
-        if reason is not None:
-            if reason == POSITION:
-                self.implausible_position += 1
-            else:
-                self.implausible_rotation += 1
+        if reason == POSITION:
+            self.implausible_position += 1
+            return None
+        if reason == ROTATION:
+            self.implausible_rotation += 1
             return None
         pose = Pose(t_receive - self.latency_s, position, quaternion, frame.frame)
-        if not self.streams.offer(pose, obj.translation):
+        verdict = self.streams.offer(pose, obj.translation, obj.rotation == (0.0, 0.0, 0.0))
+        if verdict == RIVAL:
+            self._rival(pose)
+        if verdict != FOLLOWED:
+            return None
+        if reason == OUTSIDE:  # the vehicle's own stream, beyond the volume: never fused
+            self.outside += 1
+            self._sighting, self._sighting_t = pose, t_receive
             return None
         self.poses += 1
         self.rate.record(t_receive)
+        self._last, self._last_t = pose, t_receive
         return pose
+
+    def _rival(self, pose: Pose) -> None:
+        """Log a rival stream's pose once per episode (the first pose of an episode)."""
+        streams = self.streams
+        if streams.rival_events == self._rival_logged:
+            return
+        self._rival_logged = streams.rival_events
+        followed = streams.followed
+        offset = (math.nan if followed is None
+                  else math.dist(pose.position.tolist(), followed.last.position.tolist()))
+        self._log.warning(
+            "vicon_rival_stream", object=self.object_name, episode=streams.rival_events,
+            rival_position=_xyz(pose),
+            followed_position=None if followed is None else _xyz(followed.last),
+            offset_m=offset,
+        )
 
     def _is_lost(self, obj: ObjectPose) -> bool:
         """True (and counted by kind) if the object's values encode lost tracking."""
         x, y, z = obj.translation
         rx, ry, rz = obj.rotation
+        previous, self._previous = self._previous, obj.translation
         if not all(map(math.isfinite, (x, y, z, rx, ry, rz))):
             self.non_finite += 1
+            self._previous = None
             return True
         if rx != 0.0 or ry != 0.0 or rz != 0.0:
             return False
         if x == 0.0 and y == 0.0 and z == 0.0:
             self.lost_zero += 1
             return True
-        if self.streams.held(obj.translation):
+        if obj.translation == previous or self.streams.held(obj.translation):
             self.lost_held_identity += 1
+            if self.streams.retract(obj.translation):  # the run's first item, taken back
+                self.lost_held_identity += 1
             return True
         return False
+
+
+def _xyz(pose: Pose) -> tuple[float, float, float]:
+    """A pose's NED position [m] as a tuple of floats."""
+    x, y, z = pose.position.tolist()
+    return (x, y, z)
