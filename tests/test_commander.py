@@ -135,6 +135,32 @@ def test_a_move_too_fast_for_the_limits_is_refused_naming_them() -> None:
     assert "trajectory_tilt_deg" in exc.value.reason  # 1 m in 0.5 s also tilts too far
 
 
+@pytest.mark.parametrize(("factor", "accepted"), [(0.99, False), (1.01, True)])
+def test_a_move_is_checked_exactly_at_its_tilt_rate_limit(factor: float,
+                                                           accepted: bool) -> None:
+    """A min-jerk move of d from rest starts with the jerk 60 d / T^3, tilting the thrust at
+    jerk / g (its acceleration is zero there, so nothing else turns it): the closed form
+    puts the shortest move the roll/pitch rate limit allows at T = (60 d / (g w))^(1/3).
+    1 % either side of it is refused or accepted: the motion is read exactly (polynomial
+    pieces), not sampled (a 10 ms sampling of the start would miss the peak)."""
+    lim = LIMITS.flight
+    d = 1.0
+    t_crit = (60.0 * d / (lim.gravity * lim.max_rate_rad_s)) ** (1.0 / 3.0)
+    commander = Commander(np.array([-0.5, 0.0, -1.0]), 0.0, arrival_tolerance_m=0.05,
+                          idle_land_s=60.0)
+    target, duration = np.array([0.5, 0.0, -1.0]), factor * t_crit
+    if accepted:
+        planned = plan_go_to(_base(commander, 0.0), target, None, duration, LIMITS)
+        assert planned.motion.end - planned.motion.start == pytest.approx(duration)
+        return
+    rate = 60.0 * d / (lim.gravity * duration**3)  # the closed form's peak, at the start
+    with pytest.raises(CommandRefusedError, match=f"at t = 0.00 s, .* tilt rate of {rate:.2f} "
+                       "rad/s, the roll/pitch rate limit") as exc:
+        plan_go_to(_base(commander, 0.0), target, None, duration, LIMITS)
+    assert exc.value.kind == "infeasible"
+    assert "speed" not in exc.value.reason and "deg tilt" not in exc.value.reason
+
+
 def test_hold_stops_a_moving_reference_smoothly_within_the_limits() -> None:
     commander = Commander(HOME, 0.0, arrival_tolerance_m=0.05, idle_land_s=60.0)
     commander.install(plan_go_to(_base(commander, 0.0), np.array([1.2, 0.0, -1.0]), None,

@@ -48,6 +48,7 @@ from typing import Literal
 
 import numpy as np
 
+from groundstation.control.curve import HoldSet, PieceSet, PolySet
 from groundstation.control.feasibility import FlightLimits, Volume, check_feasibility
 from groundstation.control.minjerk import min_jerk_duration
 from groundstation.control.trajectory import Trajectory
@@ -336,9 +337,8 @@ def _move_duration(start: Reference, target: FloatArray, yaw: float,
 
 @dataclass
 class _PlanView:
-    """``plan`` seen from time ``start`` as a trajectory from 0 (for the checker; it has no
-    attribute ``pieces``, the name by which the checker finds trajectories that describe
-    themselves exactly)."""
+    """``plan`` seen from time ``start`` as a trajectory from 0, for the feasibility check,
+    which reads it exactly (:meth:`pieces`): no motion is checked by sampling."""
 
     plan: Plan
     start: float
@@ -349,6 +349,31 @@ class _PlanView:
 
     def sample(self, t: float) -> Reference:
         return sample_plan(self.plan, self.start + t)
+
+    def pieces(self, t0: float, t1: float) -> list[PieceSet] | None:
+        """The plan over ``[t0, t1]`` (view time [s]) as the checker's piece sets: a quintic
+        move is one polynomial segment (its coefficients; at rest at its end after it), a
+        rest a hold. None (sampled instead) if a followed trajectory is flown in the span:
+        it was checked on its own when it was planned."""
+        out: list[PieceSet] = []
+        plan = self.plan
+        for i, piece in enumerate(plan):
+            begin = piece.start - self.start
+            end = plan[i + 1].start - self.start if i + 1 < len(plan) else max(t1, begin)
+            if end <= t0 or begin > t1 or end <= begin:
+                continue  # not the piece in force anywhere in the span
+            if isinstance(piece, Rest):
+                out.append(HoldSet(begin, end, piece.point, piece.yaw))
+            elif isinstance(piece, QuinticMove):
+                moving_until = min(end, begin + piece.duration)
+                out.append(PolySet(np.array([begin]), np.array([moving_until]),
+                                   piece.coeffs[None, :, :]))
+                if moving_until < end:
+                    rest = piece.sample(piece.end)
+                    out.append(HoldSet(moving_until, end, rest.position, rest.yaw))
+            else:
+                return None
+        return out
 
 
 def _check(pieces: Plan, start: float, horizon: float, limits: MotionLimits) -> None:
@@ -380,7 +405,7 @@ def plan_go_to(base: PlanBase, target: FloatArray, yaw: float | None,
         duration = _move_duration(ref, target, goal_yaw, limits)
         if not duration <= MAX_MOTION_S:
             raise CommandRefusedError("infeasible", f"the move would take {duration:.1f} s, "
-                                      f"longer than a motion may ({MAX_MOTION_S:g} s)")
+                                      f"longer than a motion may be ({MAX_MOTION_S:g} s)")
     p0, v0, a0 = _state4(ref)
     move = QuinticMove.between(base.start, duration, p0, v0, a0,
                                np.append(target, goal_yaw))
@@ -437,7 +462,7 @@ def plan_follow(base: PlanBase, trajectory: Trajectory, duration: float,
         raise CommandRefusedError(
             "infeasible", f"the motion would last {length:.1f} s (to the start "
             f"{begin - base.start:.1f} s, then the trajectory {duration:.1f} s), longer than "
-            f"a motion may ({MAX_MOTION_S:g} s): give a shorter duration")
+            f"a motion may be ({MAX_MOTION_S:g} s): give a shorter duration")
     end_ref = trajectory.sample(duration)
     end_yaw = end_ref.yaw + yaw_offset
     pieces: Plan = (move, Rest(move.end, first.position.copy(), move.sample(move.end).yaw),
