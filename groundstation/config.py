@@ -25,6 +25,7 @@ import ipaddress
 import math
 import os
 import re
+import stat
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -44,6 +45,7 @@ from pydantic import (
     model_validator,
 )
 from pydantic_core import CoreSchema
+from yaml.reader import ReaderError
 
 from groundstation.errors import ConfigError
 from groundstation.estimation.records import EkfParams
@@ -74,17 +76,206 @@ SensorBlock = Literal["status", "gyro", "acc", "pressure", "rc"]
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
-def _positive_weights(value: list[float]) -> list[float]:
-    if any(not (w > 0 and math.isfinite(w)) for w in value):
-        raise ValueError("weights must be finite and positive (diagonal of a PD matrix)")
+PositiveFloat = Annotated[float, Field(gt=0)]
+NonNegFloat = Annotated[float, Field(ge=0)]
+
+
+# --------------------------------------------------------------------------- physical ranges
+# Every number with a physical range is checked against it, not only for its type: a
+# configuration with gyro_scale -187564 or a Vicon variance of 1.2e29 is a typo, and it
+# must be refused before a flight, naming the field, the value, the range and its source.
+def _interval(lo: float | None, hi: float | None, lo_open: bool, hi_open: bool) -> str:
+    left = "(" if lo_open or lo is None else "["
+    right = ")" if hi_open or hi is None else "]"
+    low = "-inf" if lo is None else f"{lo:g}"
+    high = "inf" if hi is None else f"{hi:g}"
+    return f"{left}{low}, {high}{right}"
+
+
+def within(lo: float | None, hi: float | None, why: str, *, lo_open: bool = False,
+           hi_open: bool = False) -> AfterValidator:
+    """The physical range of one number, as a validator for ``Annotated[float, ...]``
+    (or ``int``): ``lo <= value <= hi``, strict where ``lo_open``/``hi_open``, no bound
+    on a side given as None. Outside it the error gives the range and ``why`` (the
+    range's source: a thesis table, physics, the hardware); the field path and the value
+    come with every error (:func:`validate_config`)."""
+    interval = _interval(lo, hi, lo_open, hi_open)
+
+    def check(value: float) -> float:
+        low = lo is not None and (value <= lo if lo_open else value < lo)
+        high = hi is not None and (value >= hi if hi_open else value > hi)
+        if low or high:
+            raise ValueError(f"outside {interval}: {why}")
+        return value
+
+    return AfterValidator(check)
+
+
+def magnitude_within(lo: float, hi: float, why: str) -> AfterValidator:
+    """Like :func:`within` for a number whose sign is free (a sensor scale or a rate gain
+    is negative for an axis mounted reversed): ``lo <= |value| <= hi``."""
+
+    def check(value: float) -> float:
+        if not lo <= abs(value) <= hi:
+            raise ValueError(f"magnitude outside [{lo:g}, {hi:g}] (either sign): {why}")
+        return value
+
+    return AfterValidator(check)
+
+
+LAB_EXTENT_M = 100.0
+"""Largest coordinate, length or volume bound in the configuration [m]: a motion-capture
+hall, not a field (Table B.1's tracked volume is +-1.5 m; the largest indoor flight arenas
+are tens of metres). A centre or a volume beyond it is a typo, not a lab."""
+
+LabCoordinate = Annotated[float, within(-LAB_EXTENT_M, LAB_EXTENT_M,
+                                        "a coordinate in the lab [m] (LAB_EXTENT_M)")]
+LabLength = Annotated[float, within(0.0, LAB_EXTENT_M, "a length in the lab [m] "
+                                    "(LAB_EXTENT_M)", lo_open=True)]
+TurnDeg = Annotated[float, within(-360.0, 360.0, "an angle or heading within one turn "
+                                  "either way [deg]")]
+TiltDeg = Annotated[float, within(0.0, 90.0, "a tilt limit [deg]: at 90 deg the rotors "
+                                  "lift nothing and beyond it they push down",
+                                  lo_open=True, hi_open=True)]
+
+COMMAND_RATE_MAX_HZ = 100.0
+"""The fastest command rate accepted (serial.command_rate_hz; spec section 4's 50-100 Hz)."""
+
+NYQUIST_RAD_S = math.pi * COMMAND_RATE_MAX_HZ
+"""The highest frequency a loop stepped at the fastest command rate can realise [rad/s]:
+no pole, bandwidth or loop gain [1/s] of a controller here can be faster (314 rad/s)."""
+
+DAY_S = 86_400.0
+"""A day [s]: no flight, not even a simulated one, has an event or a period longer."""
+
+
+def _kind(path: Path) -> str:
+    """What a path is on this machine, for an error: 'a regular file', 'a character
+    device', ..."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        return "a broken symbolic link" if path.is_symlink() else "nothing"
+    except OSError as exc:
+        return f"unreadable ({exc.strerror})"
+    for test, name in ((stat.S_ISDIR, "a directory"), (stat.S_ISREG, "a regular file"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISFIFO, "a named pipe"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "a special file"
+
+
+def _nearest_existing(path: Path) -> Path | None:
+    """``path`` or its nearest ancestor that exists (relative paths stay relative: the
+    working directory is the flight's, and need not be looked up)."""
+    for candidate in (path, *path.parents):
+        if candidate.exists() or candidate.is_symlink():
+            return candidate
+    return None
+
+
+def _directory_key(value: Path | None) -> Path | None:
+    """A directory the ground station reads or writes: an existing directory, or one
+    that can be made (its nearest existing ancestor is a directory, as the flight
+    recorder makes it with its parents). Never a device or a regular file."""
+    if value is None:
+        return value
+    found = _nearest_existing(value)
+    if found == value and not value.is_dir():
+        raise ValueError(f"names {_kind(value)}, not a directory")
+    if found is not None and found != value and not found.is_dir():
+        raise ValueError(f"cannot be made: {str(found)!r} is {_kind(found)}, not a directory")
     return value
 
 
-Weights4 = Annotated[list[float], Field(min_length=4, max_length=4),
-                     AfterValidator(_positive_weights)]
-"""Four diagonal entries of a positive-definite weight matrix (LQR Q_e, R)."""
-PositiveFloat = Annotated[float, Field(gt=0)]
-NonNegFloat = Annotated[float, Field(ge=0)]
+def _file_key(value: Path | None) -> Path | None:
+    """A file the ground station reads or writes: a regular file where it exists (never a
+    device, a pipe or a directory). Whether it exists is checked where it is needed
+    (:func:`check_files` for the files a flight reads)."""
+    if value is None:
+        return value
+    found = _nearest_existing(value)
+    if found == value and not value.is_file():
+        raise ValueError(f"names {_kind(value)}, not a regular file")
+    if found is not None and found != value and not found.is_dir():
+        raise ValueError(f"cannot exist: {str(found)!r} is {_kind(found)}, not a directory")
+    return value
+
+
+DirectoryPath = Annotated[Path, AfterValidator(_directory_key)]
+FilePath = Annotated[Path, AfterValidator(_file_key)]
+
+_HOST_LABEL = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)$")
+
+
+def _host(value: str) -> str:
+    """An IPv4 address or a host name (RFC 1123: dot-separated labels of letters, digits
+    and hyphens, at most 253 characters); ValueError naming what is wrong otherwise."""
+    try:
+        address = ipaddress.ip_address(value)
+    except ValueError:
+        address = None
+    if address is not None:
+        if address.version != 4:
+            raise ValueError("an IPv6 address: this socket is IPv4 (AF_INET); give an IPv4 "
+                             "address or a host name")
+        return value
+    labels = value.removesuffix(".").split(".")
+    if (not value or len(value) > 253 or not all(_HOST_LABEL.match(x) for x in labels)
+            or labels[-1].isdigit()):
+        raise ValueError("not an IPv4 address (0.0.0.0: every interface) or a host name "
+                         "(letters, digits, hyphens and dots)")
+    return value
+
+
+HostAddress = Annotated[str, AfterValidator(_host)]
+"""The address of a UDP socket (IPv4: the Vicon client and sender are AF_INET)."""
+
+IPC_PATH_MAX = 107
+"""Longest ``ipc://`` path ZeroMQ accepts on Linux [bytes]: ``sockaddr_un.sun_path`` less
+its terminating NUL."""
+
+
+def zmq_endpoint(value: str) -> str:
+    """A ZeroMQ endpoint a socket can bind: ``tcp://HOST:PORT`` (HOST ``*``, an IPv4
+    address, ``[IPv6]``, a host or interface name; PORT 1-65535 or ``*`` for any free
+    one), ``ipc://PATH`` or ``inproc://NAME``. ValueError naming what is wrong."""
+    transport, sep, address = value.partition("://")
+    if not sep or transport not in ("tcp", "ipc", "inproc"):
+        raise ValueError("must be a ZeroMQ endpoint: tcp://HOST:PORT, ipc://PATH or "
+                         "inproc://NAME")
+    if transport == "ipc":
+        if not address or "\0" in address or len(address.encode()) > IPC_PATH_MAX:
+            raise ValueError(f"ipc:// needs a path of 1-{IPC_PATH_MAX} bytes (a Unix "
+                             "socket's limit)")
+        return value
+    if transport == "inproc":
+        if not address:
+            raise ValueError("inproc:// needs a name")
+        return value
+    host, colon, port = address.rpartition(":")
+    if not colon or not host:
+        raise ValueError("tcp:// needs HOST:PORT, e.g. tcp://127.0.0.1:5556")
+    if port != "*" and not (port.isdigit() and 1 <= int(port) <= 65535):
+        raise ValueError(f"port {port!r}: a TCP port is 1-65535 (or * for any free one)")
+    if host == "*":
+        return value
+    if host.startswith("[") and host.endswith("]"):
+        try:
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError:
+            raise ValueError(f"{host}: not an IPv6 address") from None
+        return value
+    try:
+        _host(host)
+    except ValueError:
+        raise ValueError(f"host {host!r}: not *, an IPv4 address, [an IPv6 address], a host "
+                         "name or an interface name") from None
+    return value
+
+
+ZmqEndpoint = Annotated[str, AfterValidator(zmq_endpoint)]
 
 
 def _strict_scalars(schema: Any) -> None:
@@ -162,6 +353,9 @@ def _all_channels() -> list[Channel]:
 
 
 # --------------------------------------------------------------------------- serial link
+RcChannel = Annotated[int, within(0, 7, "an index into RC_DATA's channels_out[8] (spec)")]
+
+
 class LlConfig(ConfigModel):
     """The AscTec LL dialect's link schedule (``serial.protocol: asctec-ll``; docs/protocol.md).
 
@@ -169,24 +363,44 @@ class LlConfig(ConfigModel):
     LL_STATUS and RC_DATA with every ``status_every``-th and ``rc_every``-th of those polls.
     """
 
-    status_every: int = Field(10, ge=1, le=1000)
+    status_every: Annotated[int, within(1, 1000, "polls per LL_STATUS: at 100 Hz polls "
+                                        "1000 is one every 10 s; rarer and the battery "
+                                        "and the pilot's switch go unseen")] = 10
     # LL_STATUS (battery, serial switch, commands applied) at 10 Hz with 100 Hz IMU polls:
     # 27 B each, 5 % of the line; slower delays the supervisor's "pilot took over"
-    rc_every: int = Field(10, ge=1, le=1000)
+    rc_every: Annotated[int, within(1, 1000, "polls per RC_DATA: at 100 Hz polls 1000 is "
+                                    "one every 10 s; rarer and the pilot's sticks go "
+                                    "unseen")] = 10
     # RC_DATA (the pilot's sticks) at 10 Hz; design choice within the line budget
-    answer_timeout_ms: float = Field(80.0, gt=0, le=500.0)
+    answer_timeout_ms: Annotated[float, within(
+        0, 500.0, "the round trip is ~40 ms; half a second is 50 unanswered polls at 100 Hz",
+        lo_open=True)] = 80.0
     # a poll not answered completely by then is counted unanswered: above the round trip
     # (57600 baud: 1 ms up, 7 ms down, the radio's latency: 30-40 ms in the virtual lab)
-    ack_timeout_ms: float = Field(80.0, gt=0, le=500.0)
+    ack_timeout_ms: Annotated[float, within(
+        0, 500.0, "the round trip is ~40 ms; half a second is 25 commands at 50 Hz",
+        lo_open=True)] = 80.0
     # a command whose 5-byte acknowledgement has not arrived by then is counted missing
-    fallback_ms: float = Field(100.0, ge=20.0, le=1000.0)
+    fallback_ms: Annotated[float, within(
+        20.0, 1000.0, "the firmware's fallback: AscTec's SDK used 200 ms; below 20 ms no "
+        "command link keeps it, beyond a second the vehicle flies on a stale command")] = 100.0
     # the LL firmware's fallback after the last command: undocumented; AscTec's later SDK
     # used 200 ms; 100 ms like the X-3D's watchdog until measured on the vehicle
-    rc_channels: tuple[int, int, int, int] = (0, 1, 2, 3)
+    rc_channels: tuple[RcChannel, RcChannel, RcChannel, RcChannel] = (0, 1, 2, 3)
     # RC_DATA channels_out index of pitch, roll, thrust, yaw: AscTec SDK order, unverified
     motor_start_yaw: Literal[-2047, 2047] = -2047
     # the motor gesture's yaw to start (the opposite stops): drivers disagree on the sign
-    motor_gesture_s: float = Field(0.5, gt=0, le=3.0)  # how long the gesture is held
+    motor_gesture_s: Annotated[float, within(
+        0, 3.0, "public drivers hold the gesture about half a second; 3 s is ample",
+        lo_open=True)] = 0.5  # how long the gesture is held
+
+    @field_validator("rc_channels")
+    @classmethod
+    def _distinct(cls, value: tuple[int, ...]) -> tuple[int, ...]:
+        if len(set(value)) != len(value):
+            raise ValueError("a channel index given twice: pitch, roll, thrust and yaw are "
+                             "four different sticks")
+        return value
 
 
 class SerialConfig(ConfigModel):
@@ -197,18 +411,26 @@ class SerialConfig(ConfigModel):
     # the vehicle's dialect: configured, never guessed from the bytes (the dialects share
     # descriptor 0x01 for different packets)
     port: str = "/dev/ttyUSB0"  # the lab's XBee adapter; a pty path or pyserial URL also works
-    baud: int = Field(57600, gt=0, le=4_000_000)
-    # spec section 1 default (design choice); at most the 4 Mbaud of the fastest USB UARTs
+    baud: Annotated[int, within(1200, 4_000_000, "from the slowest rate an XBee radio "
+                                "offers (BD=0) to the 4 Mbaud of the fastest USB UARTs")] = 57600
+    # spec section 1 default (design choice)
     crc_profile: Literal["asctec", "kermit", "mcrf4xx"] = "asctec"  # spec section 2
     sensors: list[SensorBlock] = Field(default_factory=_default_sensors)
     # STATUS+GYRO+ACC+RC = 41 B/frame, 71% of 57600 baud at 100 Hz (spec section 6)
-    data_period_ms: int = Field(10, ge=1, le=1000)  # 100 Hz IMU, thesis Ch. 1.2.2
-    command_rate_hz: float = Field(50.0, ge=20.0, le=100.0)
+    data_period_ms: Annotated[int, within(1, 1000, "the X-3D streams at most every 1 ms; "
+                                          "slower than 1 Hz is no IMU to fly on")] = 10
+    # 100 Hz IMU, thesis Ch. 1.2.2
+    command_rate_hz: Annotated[float, within(
+        20.0, COMMAND_RATE_MAX_HZ, "spec section 4's target is 50-100 Hz; below 20 Hz a "
+        "command period exceeds half the vehicle's 100 ms watchdog")] = 50.0
     # 50 Hz: spec section 4 target 50-100 Hz; thesis flew 33 Hz over XBee (App. A.3).
-    # >= 20 Hz so a command period never exceeds half the 100 ms watchdog.
-    stale_command_s: float = Field(0.25, gt=0, le=1.0)
+    stale_command_s: Annotated[float, within(
+        0, 1.0, "the keep-alive flies the loop's last command this long: beyond a second "
+        "a stalled loop would steer the vehicle", lo_open=True)] = 0.25
     # keep-alive resends the loop's last command only this long, then hands back (mask 0)
-    handover_blend_s: NonNegFloat = 1.0  # bumpless-transfer blend time; thesis silent
+    handover_blend_s: Annotated[float, within(
+        0.0, 10.0, "a blend longer than 10 s leaves the vehicle half with the pilot for "
+        "longer than a take-off takes")] = 1.0  # bumpless-transfer blend time; thesis silent
     ll: LlConfig = LlConfig()  # read with protocol asctec-ll only
 
     @field_validator("sensors")
@@ -252,7 +474,8 @@ class ChannelsConfig(ConfigModel):
 class RotationConfig(ConfigModel):
     """A fixed rotation given as intrinsic X-Y-Z Euler angles in degrees."""
 
-    euler_xyz_deg: Vec3 = Field(default_factory=lambda: [180.0, 0.0, 0.0])
+    euler_xyz_deg: list[TurnDeg] = Field(default_factory=lambda: [180.0, 0.0, 0.0],
+                                         min_length=3, max_length=3)
 
     def as_matrix(self) -> np.ndarray:
         """(3, 3) rotation matrix Rx(a) @ Ry(b) @ Rz(c)."""
@@ -261,6 +484,9 @@ class RotationConfig(ConfigModel):
         return np.asarray(Rotation.from_euler("XYZ", self.euler_xyz_deg, degrees=True).as_matrix())
 
 
+VICON_RATE_MAX_HZ = 2000.0
+"""The fastest a Vicon system streams [Hz] (its cameras' top frame rate)."""
+
 Box = tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
 """An axis-aligned box ``((x_min, x_max), (y_min, y_max), (z_min, z_max))``, NED [m]."""
 
@@ -268,28 +494,55 @@ Box = tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
 class ViconConfig(ConfigModel):
     """The Vicon UDP object stream (``docs/vicon-udp.md``)."""
 
-    bind_address: str = "0.0.0.0"
-    port: int = Field(51001, ge=1, le=65535)  # Tracker's conventional UDP object-stream port
+    bind_address: HostAddress = "0.0.0.0"  # IPv4 (the client is AF_INET); 0.0.0.0: all
+    port: Annotated[int, within(1, 65535, "a UDP port")] = 51001
+    # Tracker's conventional UDP object-stream port
     object_name: str = Field("X3D", min_length=1, max_length=23)  # spec: at most 23 characters
     world_to_ned: RotationConfig = RotationConfig()  # Vicon z-up -> NED: 180 deg about x (spec)
     body_to_object: RotationConfig = RotationConfig()  # FRD body -> object frame: 180 deg about x
-    latency_s: float = Field(0.005, ge=0, le=0.5)  # spec: "a few ms"; Tracker + network latency
-    expected_rate_hz: PositiveFloat = 100.0  # thesis lab streamed 100 Hz (App. B)
-    min_rate_hz: PositiveFloat = 8.0  # warn below: the thesis flew at 10 Hz (Ch. 11.1)
-    max_speed_m_s: PositiveFloat = 5.0  # outlier gate; spec "a few m/s"
-    max_rotation_rate_rad_s: PositiveFloat = 30.0  # outlier gate; spec "tens of rad/s"
-    restart_silence_s: PositiveFloat = 1.0  # a longer silence is a Tracker restart (spec)
-    restart_backjump_frames: int = Field(1000, gt=0)  # a larger backward jump is a restart
-    plausibility_margin_m: NonNegFloat = 0.5
+    latency_s: Annotated[float, within(0.0, 0.5, "spec: Tracker and the network add a few "
+                                       "ms; half a second is no motion capture")] = 0.005
+    # spec: "a few ms"; Tracker + network latency
+    expected_rate_hz: Annotated[float, within(
+        1.0, VICON_RATE_MAX_HZ, "the thesis flew down to 1 Hz (Ch. 11.1); Vicon cameras "
+        "stream at most ~2000 Hz")] = 100.0  # thesis lab streamed 100 Hz (App. B)
+    min_rate_hz: Annotated[float, within(
+        0.0, VICON_RATE_MAX_HZ, "Vicon cameras stream at most ~2000 Hz",
+        lo_open=True)] = 8.0  # warn below: the thesis flew at 10 Hz (Ch. 11.1)
+    max_speed_m_s: Annotated[float, within(
+        0.0, 50.0, "an outlier gate [m/s] (spec: 'a few m/s'); at 50 m/s it lets a pose "
+        "cross the lab in one 100 Hz frame and gates nothing", lo_open=True)] = 5.0
+    max_rotation_rate_rad_s: Annotated[float, within(
+        0.0, 200.0, "an outlier gate [rad/s] (spec: 'tens of rad/s'); 200 rad/s is 32 turns "
+        "a second, beyond any quadrotor", lo_open=True)] = 30.0
+    restart_silence_s: Annotated[float, within(
+        0.0, 60.0, "a longer silence is a Tracker restart (spec); the flight has landed on "
+        "Vicon loss (safety.vicon_loss_land_s <= 30 s) long before a minute",
+        lo_open=True)] = 1.0
+    restart_backjump_frames: Annotated[int, within(
+        1, 1_000_000, "frames [-]: a larger backward jump is a Tracker restart; 10^6 "
+        "frames is 2.8 h at 100 Hz, beyond any reordering")] = 1000
+    plausibility_margin_m: Annotated[float, within(
+        0.0, LAB_EXTENT_M, "a margin beyond LAB_EXTENT_M accepts any pose [m]")] = 0.5
     # [m] a pose further than this outside safety.volume_x/y/z is refused as impossible
     # (issue 14). The supervisor lands at the volume's edge; braking from the fastest
     # reference (safety.max_speed_m_s, 1.5 m/s) at the 35 deg tilt limit takes 0.16 m,
     # and the cameras see a little beyond the volume (Table B.1): 0.5 m covers both
-    reanchor_poses: int = Field(3, ge=2)
+    reanchor_poses: Annotated[int, within(
+        2, 100, "poses [-]: never one (a stray pose); 100 is 10 s at 10 Hz, longer than "
+        "Vicon may be lost before the flight lands")] = 3
     # consistent poses in a row before a pose stream is believed: at start-up, after a
     # gap, for a new stream, and before the estimator re-anchors on poses it gated (issue
     # 14: never one pose). 3: 20 ms late at 100 Hz, 0.2 s at 10 Hz; one stray pose is not
     # enough, and a chance agreement of three is as unlikely as the gate allows
+
+    @field_validator("object_name")
+    @classmethod
+    def _printable(cls, value: str) -> str:
+        if not value.isprintable():
+            raise ValueError("holds a control character: Tracker's names are printable "
+                             "text, NUL-padded on the wire (spec), so it would never match")
+        return value
 
     @model_validator(mode="after")
     def _rates(self) -> ViconConfig:
@@ -307,60 +560,137 @@ class ViconConfig(ConfigModel):
 
 
 # --------------------------------------------------------------------------- vehicle
+GRAVITY_RANGE_M_S2 = (9.76, 9.84)
+"""Gravity at the Earth's surface [m/s^2]: 9.76 on the highest equatorial summits to 9.83
+at the poles; the thesis's 9.82 (eq. 3.8) is Denmark's."""
+
+THRUST_MAX_N = 500.0
+"""Largest lift a thrust map may give over the stick range 0..4095 [N]: the heaviest vehicle
+accepted (vehicle.mass_kg <= 20 kg) at a thrust-to-weight ratio of 2.5. The X-3D's eq. 3.7
+gives 10 N at full stick."""
+
+_K_RATE = max(abs(k) for k in _QUAD.k_rate)
+
+RateGain = Annotated[float, magnitude_within(
+    _K_RATE / 100, _K_RATE * 100,
+    "rad/s per stick unit, two decades either side of Ch. 3.3.1's (2.25 rad/s at stick "
+    "2047): full stick from 0.02 to 225 rad/s")]
+GyroScale = Annotated[float, magnitude_within(
+    min(K_GYRO_TABLE_6_2) / 1000, max(K_GYRO_TABLE_6_2) * 50,
+    "rad/s per count, 1/1000 to 50 x Table 6.2's: from 16-bit counts (the LL dialect's "
+    "int16) over a MEMS gyro's narrowest range (+-50 deg/s: 2.7e-5) to 10-bit counts "
+    "(Ch. 6.2's 0..1023) over its widest (+-4000 deg/s: 0.14)")]
+AccScale = Annotated[float, magnitude_within(
+    min(K_ACC_TABLE_6_2) / 1000, max(K_ACC_TABLE_6_2) * 50,
+    "m/s^2 per count, 1/1000 to 50 x Table 6.2's: from 16-bit counts over a MEMS "
+    "accelerometer's narrowest range (+-2 g: 6e-4) to 10-bit counts over its widest "
+    "(+-16 g: 0.31)")]
+AdcZero = Annotated[float, within(-32768.0, 65535.0, "counts: the zero lies in the ADC's "
+                                  "range, 12-bit 0..4095 (X-3D) or int16 (LL dialect)")]
+
+
+def variance_band(table: tuple[float, ...]) -> tuple[float, float]:
+    """Where a sensor's noise variance may lie: from 1/1000 of the smallest of its thesis
+    table to 10^4 times the largest. Below, a sensor better than any of its class; above,
+    a deviation 100 times the one measured is no sensor (the room above lets a tuning
+    de-weight one)."""
+    return min(table) / 1e3, max(table) * 1e4
+
+
+def _variance(table: tuple[float, ...], source: str, unit: str) -> AfterValidator:
+    return within(*variance_band(table),
+                  f"{unit}, from 1/1000 to 10^4 x {source}'s: a variance of this sensor, not "
+                  "a typo")
+
+
+GyroVariance = Annotated[float, _variance(GYRO_VARIANCE_TABLE_6_3, "Table 6.3", "(rad/s)^2")]
+AccVariance = Annotated[float, _variance(ACC_VARIANCE_TABLE_6_3, "Table 6.3", "(m/s^2)^2")]
+ViconPositionVariance = Annotated[float, _variance(VICON_POSITION_VARIANCE_TABLE_6_1,
+                                                   "Table 6.1", "m^2")]
+ViconQuaternionVariance = Annotated[float, _variance(VICON_QUATERNION_VARIANCE_TABLE_6_1,
+                                                     "Table 6.1", "quaternion units^2")]
+RateLoopTau = Annotated[float, within(
+    0.0, 1.0, "s: a rate loop slower than a second could not hold a hover (Fig. 3.8 rises "
+    "in 0.14 s)", lo_open=True)]
+CommandDelay = Annotated[float, within(
+    0.0, 0.5, "s: one 50 Hz command period is 20 ms; half a second is 25 periods, more "
+    "than any radio link of the class lags")]
+
+
 class VehicleConfig(ConfigModel):
     """The X-3D model parameters (thesis Ch. 3 and 6)."""
 
-    mass_kg: PositiveFloat = _QUAD.mass
+    mass_kg: Annotated[float, within(
+        0.01, 20.0, "kg: from a 27 g micro quadrotor to a 20 kg lifter")] = _QUAD.mass
     # not printed in the thesis: 0.60 kg makes the eq. 3.7 polynomial hover near mid-stick
     # (F_lift(2000) = -5.93 N = -0.603 kg * 9.82), DESIGN.md errata
-    gravity: PositiveFloat = _QUAD.g  # thesis eq. 3.8, Denmark
-    k_rate: Vec3 = Field(default_factory=lambda: list(_QUAD.k_rate))
+    gravity: Annotated[float, within(*GRAVITY_RANGE_M_S2, "m/s^2: gravity at the Earth's "
+                                     "surface (GRAVITY_RANGE_M_S2)")] = _QUAD.g
+    # thesis eq. 3.8, Denmark
+    k_rate: list[RateGain] = Field(default_factory=lambda: list(_QUAD.k_rate),
+                                   min_length=3, max_length=3)
     # [K_phi, K_theta, K_psi] rad/s per stick unit: max roll step 2047 gave 2.25 rad/s
     # (Ch. 3.3.1), identified values not printed (DESIGN.md errata); yaw assumed the same
     thrust_poly: list[float] = Field(
         default_factory=lambda: list(THRUST_POLY_EQ37), min_length=4, max_length=4,
     )  # eq. 3.7, [a3, a2, a1, a0], body-z force [N] (negative = up); App. C.1's a2 is a typo
-    induced_inflow: float = Field(_QUAD.inflow, lt=0)  # I_i, eq. 3.9 and eq. C.8 [N s/m]
-    gyro_scale: Vec3 = Field(default_factory=lambda: list(K_GYRO_TABLE_6_2))
-    # Table 6.2 K_gyro [rad/s per count]
-    acc_scale: Vec3 = Field(default_factory=lambda: list(K_ACC_TABLE_6_2))
-    # Table 6.2 K_acc [m/s^2 per count]
-    gyro_zero: Vec3 = Field(default_factory=lambda: [2048.0, 2048.0, 2048.0])
+    induced_inflow: Annotated[float, within(
+        _QUAD.inflow * 100, _QUAD.inflow / 100, "N s/m, negative (a climb meets the "
+        "inflow's drag): two decades either side of eq. C.8's")] = _QUAD.inflow
+    # I_i, eq. 3.9 and eq. C.8 [N s/m]
+    gyro_scale: list[GyroScale] = Field(default_factory=lambda: list(K_GYRO_TABLE_6_2),
+                                        min_length=3, max_length=3)
+    # Table 6.2 K_gyro [rad/s per count]; negative for an axis mounted reversed
+    acc_scale: list[AccScale] = Field(default_factory=lambda: list(K_ACC_TABLE_6_2),
+                                      min_length=3, max_length=3)
+    # Table 6.2 K_acc [m/s^2 per count]; negative for an axis mounted reversed
+    gyro_zero: list[AdcZero] = Field(default_factory=lambda: [2048.0, 2048.0, 2048.0],
+                                     min_length=3, max_length=3)
     # spec section 3.3: 12-bit counts, zero at mid-range (calibrate per vehicle)
-    acc_zero: Vec3 = Field(default_factory=lambda: [2048.0, 2048.0, 2048.0])  # as gyro_zero
-    gyro_variance: Vec3 = Field(default_factory=lambda: list(GYRO_VARIANCE_TABLE_6_3))
+    acc_zero: list[AdcZero] = Field(default_factory=lambda: [2048.0, 2048.0, 2048.0],
+                                    min_length=3, max_length=3)  # as gyro_zero
+    gyro_variance: list[GyroVariance] = Field(
+        default_factory=lambda: list(GYRO_VARIANCE_TABLE_6_3), min_length=3, max_length=3)
     # Table 6.3 [(rad/s)^2]
-    acc_variance: Vec3 = Field(default_factory=lambda: list(ACC_VARIANCE_TABLE_6_3))
+    acc_variance: list[AccVariance] = Field(
+        default_factory=lambda: list(ACC_VARIANCE_TABLE_6_3), min_length=3, max_length=3)
     # Table 6.3 [(m/s^2)^2]
-    vicon_position_variance: Vec3 = Field(
-        default_factory=lambda: list(VICON_POSITION_VARIANCE_TABLE_6_1))
+    vicon_position_variance: list[ViconPositionVariance] = Field(
+        default_factory=lambda: list(VICON_POSITION_VARIANCE_TABLE_6_1),
+        min_length=3, max_length=3)
     # Table 6.1 [m^2]
-    vicon_quaternion_variance: list[float] = Field(
+    vicon_quaternion_variance: list[ViconQuaternionVariance] = Field(
         default_factory=lambda: list(VICON_QUATERNION_VARIANCE_TABLE_6_1),
         min_length=4, max_length=4)  # Table 6.1, q0..q3
-    acc_saturation: PositiveFloat = ACC_SATURATION_M_S2  # Ch. 6.2: accelerometer saturation
-    rate_loop_tau_s: PositiveFloat = _QUAD.rate_tau
+    acc_saturation: Annotated[float, within(
+        GRAVITY_RANGE_M_S2[1], 160.0, "m/s^2: above 1 g (the accelerometer must read the "
+        "hover) and at most a MEMS accelerometer's widest range, 16 g")] = ACC_SATURATION_M_S2
+    # Ch. 6.2: accelerometer saturation
+    rate_loop_tau_s: RateLoopTau = _QUAD.rate_tau
     # on-board rate loop as a first-order lag: Fig. 3.8 rises (10-90 %) in 0.14 s = 2.2 tau.
     # The controller design, the virtual lab and the evaluation all use this one value
-    command_delay_s: NonNegFloat = 0.02
+    command_delay_s: CommandDelay = 0.02
     # transport delay of a COMMAND (radio and firmware) before the vehicle applies it;
     # Ch. 3.3.1 identified the rate gains "with a time delay" without printing it; 20 ms
     # is one 50 Hz command period (XBee at 57600 baud, thesis App. A)
 
-    @field_validator("k_rate", "gyro_scale", "acc_scale")
+    @field_validator("thrust_poly")
     @classmethod
-    def _nonzero(cls, value: list[float]) -> list[float]:
-        if any(v == 0.0 or not math.isfinite(v) for v in value):
-            raise ValueError("every entry must be finite and non-zero")
-        return value
+    def _lift_in_range(cls, value: list[float]) -> list[float]:
+        # Horner in Python floats: a huge coefficient overflows to inf (or inf - inf to
+        # nan), which the comparison refuses, without numpy's overflow warnings
+        def lift(u: float) -> float:
+            out = 0.0
+            for a in value:
+                out = out * u + a
+            return out
 
-    @field_validator(
-        "gyro_variance", "acc_variance", "vicon_position_variance", "vicon_quaternion_variance"
-    )
-    @classmethod
-    def _positive(cls, value: list[float]) -> list[float]:
-        if any(not v > 0 for v in value):
-            raise ValueError("variances must be positive")
+        worst = next((f for f in (lift(u) for u in range(0, 4097, 64))
+                      if not abs(f) <= THRUST_MAX_N), 0.0)
+        if worst:
+            raise ValueError(f"gives {worst:g} N within the stick range 0..4095: outside "
+                             f"[-{THRUST_MAX_N:g}, {THRUST_MAX_N:g}] N (THRUST_MAX_N: the "
+                             "heaviest vehicle accepted at a thrust-to-weight ratio of 2.5)")
         return value
 
     @model_validator(mode="after")
@@ -375,41 +705,118 @@ class VehicleConfig(ConfigModel):
 
 
 # --------------------------------------------------------------------------- estimator
+DiagonalBand = tuple[int, int, float, float, str]
+"""Entries ``[start, stop)`` of a covariance's diagonal lie in ``[lo, hi]``: what they are."""
+
+R_DIAGONAL_BANDS: tuple[DiagonalBand, ...] = (
+    (0, 3, *variance_band(VICON_POSITION_VARIANCE_TABLE_6_1),
+     "Vicon position variances [m^2], 1/1000 to 10^4 x Table 6.1's"),
+    (3, 7, *variance_band(VICON_QUATERNION_VARIANCE_TABLE_6_1),
+     "Vicon quaternion variances, 1/1000 to 10^4 x Table 6.1's"),
+)
+
+P0_DIAGONAL_BANDS: tuple[DiagonalBand, ...] = (
+    # the lower bound: a prior tighter than 1e-12 is below what the filter's doubles
+    # separate from its other variances; the upper: a spread no lab or vehicle has
+    (0, 3, 1e-12, LAB_EXTENT_M ** 2, "position variances [m^2], at most a lab's extent "
+     "squared"),
+    (3, 7, 1e-12, 1.0, "quaternion variances: a unit quaternion's entries lie in [-1, 1]"),
+    (7, 10, 1e-12, 2500.0, "velocity variances [(m/s)^2], at most (50 m/s)^2"),
+    (10, 13, 1e-12, 1.0, "gyro bias variances [(rad/s)^2], at most (1 rad/s)^2"),
+    (13, 16, 1e-12, 100.0, "accelerometer bias variances [(m/s^2)^2], at most 1 g squared"),
+)
+
+
+def _check_diagonal(value: Covariance, n: int, bands: tuple[DiagonalBand, ...]) -> None:
+    """Raise ValueError naming the first diagonal entry outside its band."""
+    diagonal = np.diag(_matrix(value, n, "covariance"))
+    for start, stop, lo, hi, what in bands:
+        for i in range(start, stop):
+            if not lo <= diagonal[i] <= hi:
+                raise ValueError(f"diagonal entry {i} = {diagonal[i]:g} outside "
+                                 f"[{lo:g}, {hi:g}]: {what}")
+
+
 class EstimatorConfig(ConfigModel):
     """The IMU-driven EKF (thesis Ch. 7). Sensor variances come from the vehicle section."""
 
-    gyro_bias_walk: PositiveFloat = 1e-6
+    gyro_bias_walk: Annotated[float, within(
+        1e-10, 1e-2, "(rad/s)^2/s, four decades either side of the tuned default: at 1e-2 "
+        "the bias wanders 0.1 rad/s in a second, no gyro's")] = 1e-6
     # gyro bias random walk [(rad/s)^2/s]: tuned (thesis: Q "determined by manual tuning")
-    acc_bias_walk: PositiveFloat = 1e-4  # accelerometer bias random walk [(m/s^2)^2/s], tuned
-    process_noise_scale: PositiveFloat = 1.0
+    acc_bias_walk: Annotated[float, within(
+        1e-8, 1.0, "(m/s^2)^2/s, four decades either side of the tuned default: at 1 the "
+        "bias wanders 1 m/s^2 in a second, no accelerometer's")] = 1e-4
+    # accelerometer bias random walk [(m/s^2)^2/s], tuned
+    process_noise_scale: Annotated[float, within(
+        1e-3, 1e3, "three decades either side of the measured Table 6.3 variances")] = 1.0
     # multiplies the Table 6.3 IMU variances used as process noise (1 = as measured)
     r_override: Covariance | None = None
     # optional 7x7 (or diagonal 7) Vicon R replacing Table 6.1 [m^2, -]
     initial_covariance: Covariance = Field(
         default_factory=lambda: [1e-4] * 3 + [1e-4] * 4 + [1e-2] * 3 + [1e-3] * 3 + [1e-1] * 3
     )  # 16 diagonal: P, q, v, gyro bias, acc bias; loose enough for biases to settle in ~3 s
-    gate_probability: float = Field(0.9999, gt=0.5, lt=1.0)
+    gate_probability: Annotated[float, within(
+        0.5, 1.0, "a probability: at 0.5 the gate refuses half the honest poses, at 1 it "
+        "gates nothing", lo_open=True, hi_open=True)] = 0.9999
     # chi-square innovation gate; 1e-4 false-reject rate per update
-    divergence_trace: PositiveFloat = 10.0
+    divergence_trace: Annotated[float, within(
+        0.0, 1e4, "16-layout units: a trace of 10^4 is a 58 m spread per axis, a failsafe "
+        "that never fires in a lab", lo_open=True)] = 10.0
     # covariance trace above which the estimate is declared diverged (failsafe)
-    max_vicon_delay_s: PositiveFloat = 0.2  # older poses are dropped instead of re-propagated
-    settle_time_s: PositiveFloat = 3.0  # on the ground before take-off, thesis Ch. 7.4 (~3 s)
+    max_vicon_delay_s: Annotated[float, within(
+        0.0, 1.0, "s: poses arrive a few ms late (spec); a second-old pose is history",
+        lo_open=True)] = 0.2  # older poses are dropped instead of re-propagated
+    settle_time_s: Annotated[float, within(
+        0.0, 60.0, "s: a minute on the ground is 20 times Ch. 7.4's settling",
+        lo_open=True)] = 3.0  # on the ground before take-off, thesis Ch. 7.4 (~3 s)
 
     @field_validator("r_override")
     @classmethod
     def _r_pd(cls, value: Covariance | None) -> Covariance | None:
         if value is not None:
             _check_covariance(value, 7, "r_override")
+            _check_diagonal(value, 7, R_DIAGONAL_BANDS)
         return value
 
     @field_validator("initial_covariance")
     @classmethod
     def _p0_pd(cls, value: Covariance) -> Covariance:
         _check_covariance(value, 16, "initial_covariance")
+        _check_diagonal(value, 16, P0_DIAGONAL_BANDS)
         return value
+
+    @model_validator(mode="after")
+    def _starts_converged(self) -> EstimatorConfig:
+        trace = float(np.trace(_matrix(self.initial_covariance, 16, "initial_covariance")))
+        if trace >= self.divergence_trace:
+            raise ValueError(f"divergence_trace {self.divergence_trace:g} is not above the "
+                             f"trace of initial_covariance ({trace:g}): the estimator would "
+                             "be declared diverged before it started")
+        return self
 
 
 # --------------------------------------------------------------------------- controller
+_WEIGHT_WHY = ("weights are relative: six decades either side of 1, beyond which Q over R "
+               "spans more than the 10^12 a Riccati solution in doubles resolves")
+Weight = Annotated[float, within(1e-6, 1e6, _WEIGHT_WHY)]
+IntegralWeight = Annotated[float, within(0.0, 1e6, f"0 turns one off; {_WEIGHT_WHY}")]
+Weights4 = Annotated[list[Weight], Field(min_length=4, max_length=4)]
+"""Four diagonal entries of a positive-definite weight matrix (LQR Q_e, R)."""
+IntegralWeights4 = Annotated[list[IntegralWeight], Field(min_length=4, max_length=4)]
+IntegralLimit = Annotated[float, within(
+    0.0, LAB_EXTENT_M, "m s: a clamp beyond LAB_EXTENT_M m s clamps nothing in a lab",
+    lo_open=True)]
+LoopRate = Annotated[float, within(
+    0.0, NYQUIST_RAD_S, "rad/s (or 1/s): no faster than the Nyquist frequency of the "
+    "fastest command rate, pi x 100 Hz (NYQUIST_RAD_S)", lo_open=True)]
+LoopGain = Annotated[float, within(0.0, NYQUIST_RAD_S, "1/s: no loop faster than the Nyquist "
+                                   "frequency of the fastest command rate (NYQUIST_RAD_S)")]
+VelocityGain = Annotated[float, within(
+    0.0, 100.0, "x/y: rad of tilt, z: N, per m/s (or m/s^2, or m); at 100 the 20 deg tilt "
+    "limit is reached at 3.5 mm/s and z asks 17 x the X-3D's weight per m/s")]
+
+
 class LqrConfig(ConfigModel):
     """LQR with a reference model (thesis Ch. 9). Weights on the error e = r - y."""
 
@@ -418,19 +825,23 @@ class LqrConfig(ConfigModel):
     r_input: Weights4 = Field(default_factory=lambda: [4.0, 4.0, 4.0, 2.0])
     # R on [omega_x, omega_y, omega_z, F_z] [1/(rad/s)^2, 1/N^2]: the body-rate form of
     # eq. 4.31's input (sticks = omega / K), tuned
-    q_integral: list[float] | None = None
+    q_integral: IntegralWeights4 | None = None
     # weights on the integrated [x, y, z, q3] errors; None = no integrators (the
     # disturbance observer below already removes the steady-state error)
-    integral_limit: PositiveFloat = 2.0
+    integral_limit: IntegralLimit = 2.0
     # anti-windup clamp on each integrated error [m s]; 0.5 saturated under a 10 % thrust
     # error in the virtual lab (tests/test_control_disturbance.py)
-    disturbance_tau_s: PositiveFloat | None = 1.0
+    disturbance_tau_s: Annotated[float, within(
+        0.0, 100.0, "s: an observer slower than 100 s (five 20 s laps) removes nothing "
+        "within a flight", lo_open=True)] | None = 1.0
     # constant-disturbance observer time constant; beyond the thesis: zero steady-state
     # error under thrust error, droop, wrong mass or accelerometer bias (issue 7)
     velocity_source: Literal["reference", "samples"] = "reference"
     # constant-velocity model: the trajectory's own velocity, or filtered sample
     # differences as the thesis did (eq. 9.22-9.26)
-    velocity_filter: float = Field(0.5, ge=0.0, lt=1.0)
+    velocity_filter: Annotated[float, within(
+        0.0, 1.0, "a weight of the previous velocity: at 1 the velocity never changes",
+        hi_open=True)] = 0.5
     # weight of the previous velocity when velocity_source is "samples", tuned
     design_model: Literal["rate-loop", "thesis"] = "rate-loop"
     # rate-loop: design on the hover model with the rate-loop lag and the command delay
@@ -441,43 +852,50 @@ class LqrConfig(ConfigModel):
 class PidConfig(ConfigModel):
     """Cascaded position/velocity/attitude PID (thesis Ch. 8 baseline)."""
 
-    position_kp: Vec3 = Field(default_factory=lambda: [0.8, 0.8, 1.2])  # [1/s], tuned
-    velocity_kp: Vec3 = Field(default_factory=lambda: [0.25, 0.25, 4.0])
+    position_kp: list[LoopGain] = Field(default_factory=lambda: [0.8, 0.8, 1.2],
+                                        min_length=3, max_length=3)  # [1/s], tuned
+    velocity_kp: list[VelocityGain] = Field(default_factory=lambda: [0.25, 0.25, 4.0],
+                                            min_length=3, max_length=3)
     # x/y: rad tilt per m/s; z: N per m/s; tuned
-    velocity_ki: Vec3 = Field(default_factory=lambda: [0.05, 0.05, 1.5])  # tuned
-    velocity_kd: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])  # tuned
-    attitude_kp: Vec3 = Field(default_factory=lambda: [4.0, 4.0, 2.0])
+    velocity_ki: list[VelocityGain] = Field(default_factory=lambda: [0.05, 0.05, 1.5],
+                                            min_length=3, max_length=3)  # tuned
+    velocity_kd: list[VelocityGain] = Field(default_factory=lambda: [0.0, 0.0, 0.0],
+                                            min_length=3, max_length=3)  # tuned
+    attitude_kp: list[LoopGain] = Field(default_factory=lambda: [4.0, 4.0, 2.0],
+                                        min_length=3, max_length=3)
     # rate set point per rad of attitude error [1/s], tuned
-    max_tilt_deg: PositiveFloat = 20.0  # tilt command limit, tuned
+    max_tilt_deg: TiltDeg = 20.0  # tilt command limit, tuned
 
 
 class HinfConfig(ConfigModel):
     """H-infinity controller (thesis Ch. 10): the loop uses a stored gain."""
 
-    gain_file: Path | None = None
+    gain_file: FilePath | None = None
     # a gain written by `gs synth hinf`; None = the packaged design selected below
     include_rate_loop: bool = True
     # design on the model with the rate-loop lag (Ch. 10.3): the thesis's model without
     # it gave a controller that did not stabilise the real vehicle
     # The packaged rate-loop gain is robust and has integral action (control/hinf.py):
     # the weights below are what `gs synth hinf` designs a new gain with
-    epsilon: PositiveFloat = 0.1  # D12 input weight (eq. 10.5), tuned
-    reference_pole: PositiveFloat = 1.0  # a_i of W_r (eq. 10.10) [rad/s], tuned
-    noise_gain: PositiveFloat = 0.01  # k of W_n (eq. 10.9), tuned
-    integral_scale: list[float] | None = Field(
-        default_factory=lambda: [0.3, 0.3, 1.0, 0.1], min_length=4, max_length=4)
+    epsilon: Weight = 0.1  # D12 input weight (eq. 10.5), tuned
+    reference_pole: LoopRate = 1.0  # a_i of W_r (eq. 10.10) [rad/s], tuned
+    noise_gain: Weight = 0.01  # k of W_n (eq. 10.9), tuned
+    integral_scale: IntegralWeights4 | None = Field(
+        default_factory=lambda: [0.3, 0.3, 1.0, 0.1])
     # weights of the integrated [x, y, z, q3] errors (beyond the thesis: zero steady-state
     # error under a thrust-map error, issue 13); null: the thesis's design, no integrators
-    robust_range: float = Field(0.3, ge=0.0, lt=1.0)
+    robust_range: Annotated[float, within(
+        0.0, 1.0, "a fraction: at 1 a rate gain or the thrust could be zero",
+        hi_open=True)] = 0.3
     # design for rate gains, rate-loop time constant and thrust per newton within +- this
     # fraction (issue 13: 30 %); 0 = the nominal plant only, as the thesis
-    pole_radius_rad_s: PositiveFloat | None = 12.0
+    pole_radius_rad_s: LoopRate | None = 12.0
     # keep the closed-loop poles in this disc: no loop faster than the 50 Hz, ~40 ms
     # delayed command link carries; null = unconstrained, as the thesis
-    min_decay_per_s: PositiveFloat | None = 0.6
+    min_decay_per_s: LoopRate | None = 0.6
     # and left of -min_decay: no loop slower (tuned on `gs eval --perturb`; must stay
     # below reference_pole); null = unconstrained, as the thesis
-    integral_limit: PositiveFloat = 2.0  # anti-windup clamp on each integrated error [m s]
+    integral_limit: IntegralLimit = 2.0  # anti-windup clamp on each integrated error [m s]
 
 
 class LqrFfConfig(ConfigModel):
@@ -489,19 +907,11 @@ class LqrFfConfig(ConfigModel):
     # worst case of `gs eval --perturb` (rate gains +-30 %, tau +-30 %, delay 5-30 ms)
     r_input: Weights4 = Field(default_factory=lambda: [1.0, 1.0, 1.0, 0.5])
     # R on [omega_x, omega_y, omega_z, F_z] [1/(rad/s)^2, 1/N^2], tuned with q_error
-    q_integral: list[float] = Field(default_factory=lambda: [20.0, 20.0, 60.0, 2.0],
-                                    min_length=4, max_length=4)
+    q_integral: IntegralWeights4 = Field(default_factory=lambda: [20.0, 20.0, 60.0, 2.0])
     # weights on the integrated [x, y, z, q3] errors: zero steady-state error under a
     # thrust-map error, a wrong mass or battery droop (issue 13); 0 turns one off. z is
     # weighted 3x: with mass and thrust map 15 % off, 20 left a 2 cm take-off tail in TRACK
-    integral_limit: PositiveFloat = 2.0  # anti-windup clamp on each integrated error [m s]
-
-    @field_validator("q_integral")
-    @classmethod
-    def _nonnegative(cls, value: list[float]) -> list[float]:
-        if any(not (w >= 0 and math.isfinite(w)) for w in value):
-            raise ValueError("integral weights must be finite and >= 0")
-        return value
+    integral_limit: IntegralLimit = 2.0  # anti-windup clamp on each integrated error [m s]
 
 
 class ControllerConfig(ConfigModel):
@@ -525,6 +935,15 @@ class ControllerConfig(ConfigModel):
 
 
 # --------------------------------------------------------------------------- trajectory
+FLIGHT_MAX_S = 3600.0
+"""Longest lap or flight time [s]: an hour outlasts any battery of the class (a 3S LiPo
+keeps the X-3D up for a quarter of it)."""
+
+FlightTime = Annotated[float, within(0.0, FLIGHT_MAX_S, "s: an hour outlasts any battery "
+                                     "of the class (FLIGHT_MAX_S)", lo_open=True)]
+Speed = Annotated[float, within(0.0, 20.0, "m/s: 20 m/s crosses Table B.1's 3 m volume in "
+                                "0.15 s", lo_open=True)]
+
 TrajectoryName = Literal[
     "hover", "step-x", "step-y", "step-z", "square", "yz-rectangle", "low-hover",
     "figure-eight", "yaw-turn", "waypoints", "none",
@@ -535,20 +954,25 @@ class TrajectoryConfig(ConfigModel):
     """The trajectory flown after take-off (thesis Ch. 11)."""
 
     name: TrajectoryName = "square"
-    center: Vec3 = Field(default_factory=lambda: [0.0, 0.0, -1.0])
+    center: list[LabCoordinate] = Field(default_factory=lambda: [0.0, 0.0, -1.0],
+                                        min_length=3, max_length=3)
     # hover point / square centre, NED [m]: 1 m above the floor as Ch. 11.1 and 11.3
-    size_m: PositiveFloat = 0.75  # square side, Ch. 11.3 (0.75 m x 0.75 m)
-    period_s: PositiveFloat = 20.0  # one lap, Ch. 11.3
-    step_m: PositiveFloat = 0.5  # step amplitude for step-x/y/z, tuned to stay in the volume
-    low_height_m: PositiveFloat = 0.02  # low-hover height, Ch. 11.4 (2 cm)
-    corner_smoothing_s: NonNegFloat = 0.0  # 0 = sharp corners as in the thesis
-    file: Path | None = None
+    size_m: LabLength = 0.75  # square side, Ch. 11.3 (0.75 m x 0.75 m)
+    period_s: FlightTime = 20.0  # one lap, Ch. 11.3
+    step_m: LabLength = 0.5  # step amplitude for step-x/y/z, tuned to stay in the volume
+    low_height_m: LabLength = 0.02  # low-hover height, Ch. 11.4 (2 cm)
+    corner_smoothing_s: Annotated[float, within(
+        0.0, FLIGHT_MAX_S, "s: no longer than the longest lap (FLIGHT_MAX_S)")] = 0.0
+    # 0 = sharp corners as in the thesis
+    file: FilePath | None = None
     # for name 'waypoints': a waypoint CSV (t, x, y, z[, yaw]) or a uav_trajectories /
     # Crazyswarm polynomial file (Duration,x^0,...), told apart by the header (README)
-    yaw_deg: float | None = None
+    yaw_deg: TurnDeg | None = None
     # heading to fly at [deg from north]; null keeps the heading the vehicle was placed at
     # (a waypoint CSV's yaw column, when present, gives the heading instead)
-    yaw_turn_deg: float = 360.0  # 'yaw-turn': turn this far over period_s, holding position
+    yaw_turn_deg: Annotated[float, within(
+        -3600.0, 3600.0, "deg: at most ten turns either way in one lap")] = 360.0
+    # 'yaw-turn': turn this far over period_s, holding position
     shaping: Literal["min-jerk", "none"] = "min-jerk"
     # min-jerk: make the reference flyable before flight (start and stop at rest, corners
     # and velocity steps blended within the safety limits, path through the corners);
@@ -568,32 +992,49 @@ class TrajectoryConfig(ConfigModel):
 class SafetyConfig(ConfigModel):
     """Limits and failsafe times the supervisor enforces."""
 
-    volume_x: tuple[float, float] = (-1.5, 1.5)  # Table B.1 tracked volume [m]
-    volume_y: tuple[float, float] = (-1.5, 1.5)  # Table B.1
-    volume_z: tuple[float, float] = (-2.0, 0.05)  # Table B.1 height 0..2 m, NED (z up is -)
-    max_tilt_deg: PositiveFloat = 35.0  # beyond this Vicon tracking is unreliable; tuned
-    handback_tilt_deg: PositiveFloat = 60.0
+    volume_x: tuple[LabCoordinate, LabCoordinate] = (-1.5, 1.5)  # Table B.1 tracked volume [m]
+    volume_y: tuple[LabCoordinate, LabCoordinate] = (-1.5, 1.5)  # Table B.1
+    volume_z: tuple[LabCoordinate, LabCoordinate] = (-2.0, 0.05)
+    # Table B.1 height 0..2 m, NED (z up is -)
+    max_tilt_deg: TiltDeg = 35.0  # beyond this Vicon tracking is unreliable; tuned
+    handback_tilt_deg: Annotated[float, within(0.0, 180.0, "deg: a tilt is at most 180",
+                                               lo_open=True)] = 60.0
     # a landing that tilts this far has lost the attitude (the controller that tripped
     # max_tilt_deg is still flying): hand back to the pilot at once
     # The failsafe times are bounded: a finite but huge value would switch the failsafe off.
-    vicon_loss_hold_s: float = Field(0.5, gt=0, le=5.0)
+    vicon_loss_hold_s: Annotated[float, within(
+        0.0, 5.0, "s: the IMU alone drifts; a hold on it longer than 5 s flies blind",
+        lo_open=True)] = 0.5
     # hold on the IMU estimate after this (PX4 figure); at most 5 s: the IMU alone drifts
-    vicon_loss_land_s: float = Field(2.0, gt=0, le=30.0)  # land if Vicon has not returned
-    link_loss_s: float = Field(0.3, gt=0, le=2.0)
+    vicon_loss_land_s: Annotated[float, within(
+        0.0, 30.0, "s: the landing on the IMU alone must begin within 30 s",
+        lo_open=True)] = 2.0  # land if Vicon has not returned
+    link_loss_s: Annotated[float, within(
+        0.0, 2.0, "s: the vehicle's own watchdog is 100 ms; at 2 s a lost link goes "
+        "unnoticed for 200 DATA frames", lo_open=True)] = 0.3
     # no DATA this long = link lost; at most 2 s (the vehicle's own watchdog is 100 ms)
-    takeoff_speed_m_s: PositiveFloat = 0.5  # climb rate for take-off, tuned
-    land_speed_m_s: PositiveFloat = 0.3  # descent rate when landing, tuned
-    preflight_timeout_s: float = Field(10.0, gt=0, le=600.0)  # give up if checks do not pass
-    takeoff_timeout_s: float = Field(20.0, gt=0, le=300.0)
+    takeoff_speed_m_s: Speed = 0.5  # climb rate for take-off, tuned
+    land_speed_m_s: Speed = 0.3  # descent rate when landing, tuned
+    preflight_timeout_s: Annotated[float, within(
+        0.0, 600.0, "s: ten minutes of preflight is a hung check", lo_open=True)] = 10.0
+    # give up if checks do not pass
+    takeoff_timeout_s: Annotated[float, within(
+        0.0, 300.0, "s: a take-off not done in five minutes is a stuck one",
+        lo_open=True)] = 20.0
     # land if the take-off has not reached the trajectory's start in this time (a 1 m
     # climb at 0.5 m/s takes ~4 s after the 1 s handover blend); tuned
-    trajectory_tilt_deg: PositiveFloat = 20.0
+    trajectory_tilt_deg: TiltDeg = 20.0
     # most tilt a reference may ask for; the rest of max_tilt_deg is left to the feedback
-    max_speed_m_s: PositiveFloat = 1.5  # fastest reference speed accepted [m/s]
-    max_yaw_rate_deg_s: PositiveFloat = 90.0  # fastest heading change of a reference, tuned
-    volume_margin_m: NonNegFloat = 0.1
+    max_speed_m_s: Speed = 1.5  # fastest reference speed accepted [m/s]
+    max_yaw_rate_deg_s: Annotated[float, within(
+        0.0, 3600.0, "deg/s: ten turns a second, beyond any quadrotor's yaw authority",
+        lo_open=True)] = 90.0  # fastest heading change of a reference, tuned
+    volume_margin_m: Annotated[float, within(0.0, LAB_EXTENT_M, "m: within a lab "
+                                             "(LAB_EXTENT_M)")] = 0.1
     # a reference must stay this far inside volume_x/y/z (tracking error, braking room)
-    gravity_check_deg: PositiveFloat = EkfParams().gravity_check_deg
+    gravity_check_deg: Annotated[float, within(
+        0.0, 180.0, "deg: an angle between two directions is at most 180",
+        lo_open=True)] = EkfParams().gravity_check_deg
     # [deg] preflight: the accelerometer's gravity must agree with the Vicon attitude
     on_signal: Literal["land", "handback"] = "land"  # what SIGINT/SIGTERM does
     on_geofence: Literal["handback", "land"] = "handback"
@@ -608,21 +1049,28 @@ class SafetyConfig(ConfigModel):
     on_second_stream: Literal["land", "hold"] = "land"
     # what a second Vicon pose stream for our object does (another sender, a misconfigured
     # Tracker): land, or hold position until it stops (landing if it lasts vicon_loss_land_s)
-    landing_confirm_s: float = Field(5.0, gt=0, le=30.0)
+    landing_confirm_s: Annotated[float, within(
+        0.0, 30.0, "s: the landing creeps down at 0.15 m/s meanwhile; in 30 s that is "
+        "4.5 m, more than the lab is high", lo_open=True)] = 5.0
     # a landing whose estimate reached the floor without evidence (Vicon, or the
     # accelerometer's floor contact) for this long hands back with thrust at hover [s]:
     # the landing creeps on down at 0.15 m/s meanwhile, 0.75 m, more than the
     # supervisor's contact_height_m of dead-reckoning drift
-    second_signal_after_s: float = Field(0.5, ge=0, le=10.0)
+    second_signal_after_s: Annotated[float, within(
+        0.0, 10.0, "s: a signal 10 s after the first is a new request, never the same one")] = 0.5
     # a second SIGINT/SIGTERM hands back at once only this long after the first [s];
     # closer ones are the same request: GNU `timeout` signals the process and then its
     # group within ~1 ms (issue 14), and a person pressing Ctrl-C twice on purpose takes
     # longer than half a second
-    battery_land_v: PositiveFloat | None = 10.5
+    battery_land_v: Annotated[float, within(
+        0.0, 65.535, "V: the X-3D's STATUS carries the voltage as uint16 mV (spec section "
+        "3.3)", lo_open=True)] | None = 10.5
     # land when the battery the X-3D reports (STATUS) stays below this [V]; 10.5 V is a
     # 3S LiPo at 3.5 V a cell, ArduPilot's copter default (BATT_LOW_VOLT); also refuses a
     # take-off. null: no battery failsafe (a vehicle without the STATUS block)
-    battery_grace_s: float = Field(10.0, gt=0, le=120.0)
+    battery_grace_s: Annotated[float, within(
+        0.0, 120.0, "s: two minutes below the landing voltage drains a LiPo",
+        lo_open=True)] = 10.0
     # ... for this long without a sample above it [s]: a voltage sag under load is not an
     # empty battery (ArduPilot's BATT_LOW_TIMER default, 10 s)
 
@@ -673,12 +1121,15 @@ class TelemetryConfig(ConfigModel):
     """
 
     enabled: bool = True
-    endpoint: str = "tcp://127.0.0.1:5556"  # loopback by default; bind to * to serve the lab
-    rate_hz: float = Field(20.0, gt=0, le=100.0)  # enough for a live view, light on the loop
+    endpoint: ZmqEndpoint = "tcp://127.0.0.1:5556"
+    # loopback by default; bind to * to serve the lab
+    rate_hz: Annotated[float, within(
+        0.0, 100.0, "Hz: at most one message per IMU sample (100 Hz)",
+        lo_open=True)] = 20.0  # enough for a live view, light on the loop
     # (the two key fields come before control_endpoint so its check can see them)
-    control_server_key: Path | None = None
+    control_server_key: FilePath | None = None
     # the daemon's CURVE key pair: a `.key_secret` file of zmq.auth.create_certificates
-    control_client_keys: Path | None = None
+    control_client_keys: DirectoryPath | None = None
     # directory of the public keys (`*.key`) of the clients allowed to connect
     control_endpoint: str | None = "tcp://127.0.0.1:5557"
     # REP socket for run-time requests (`gs channels`); loopback only by default, null disables
@@ -696,9 +1147,7 @@ class TelemetryConfig(ConfigModel):
     def _control_bind(cls, value: str | None, info: ValidationInfo) -> str | None:
         if value is None:
             return value
-        if value.partition("://")[0] not in ("tcp", "ipc", "inproc") or "://" not in value:
-            raise ValueError("must be a ZeroMQ endpoint: tcp://HOST:PORT, ipc://PATH or "
-                             "inproc://NAME")
+        zmq_endpoint(value)
         if not local_endpoint(value) and info.data.get("control_server_key") is None:
             raise ValueError("reaches beyond loopback without authentication: set "
                              "telemetry.control_server_key and telemetry.control_client_keys "
@@ -711,24 +1160,34 @@ class LoggingConfig(ConfigModel):
 
     level: Literal["debug", "info", "warning", "error"] = "info"
     format: Literal["auto", "console", "json"] = "auto"  # auto: console on a TTY, else JSON
-    flight_log_dir: Path = Path("flightlogs")
+    flight_log_dir: DirectoryPath = Path("flightlogs")
+    # a directory, or one the recorder can make (with its parents)
     mcap: bool = False
     # also write the flight as flight.mcap (gs export --format mcap) beside flight.npy
     # when the daemon closes its log (needs the analysis extra; the loop never waits)
 
 
+FifoPriority = Annotated[int, within(
+    1, 98, "SCHED_FIFO priorities are 1-99; 99 belongs to the kernel's migration and watchdog "
+    "threads")]
+
+
 class RealtimeConfig(ConfigModel):
     """What the daemon asks of the OS while it flies (see groundstation/loop/realtime.py)."""
 
-    cpu_dma_latency_us: int | None = Field(0, ge=0)
+    cpu_dma_latency_us: Annotated[int, within(
+        0, 10_000, "us: a wake-up latency longer than the 10 ms IMU period protects no "
+        "tick (null asks nothing)")] | None = 0
     # PM QoS wake-up latency bound held while flying; 0 keeps the CPUs out of idle
     # states (measured: 3-6x cheaper ticks on a VM). null leaves the idle states alone
-    fifo_priority: int | None = Field(10, ge=1, le=98)
+    fifo_priority: FifoPriority | None = 10
     # SCHED_FIFO priority of the flight loop and its threads while flying (needs
     # CAP_SYS_NICE or LimitRTPRIO; without, a warning and the normal policy). Under two
     # busy processes the normal policy let COMMAND gaps reach 114 ms (issue 14); null
     # asks for nothing
-    switch_interval_ms: float = Field(0.5, gt=0.0, le=5.0)
+    switch_interval_ms: Annotated[float, within(
+        0.0, 5.0, "ms: the longest a reader thread may delay a 10 ms tick; Python's own "
+        "default is 5 ms", lo_open=True)] = 0.5
     # GIL switch interval while flying: the longest a reader thread can delay a tick
     paced_gc: bool = True
     # freeze the start-up objects and run full garbage collections only right after a
@@ -743,12 +1202,14 @@ class ApiConfig(ConfigModel):
     ``gs goto``): the flight takes off to ``trajectory.center`` and holds there until a
     client asks for a motion; each is checked against the safety limits and volume."""
 
-    idle_land_s: float = Field(60.0, gt=0, le=3600.0)
+    idle_land_s: Annotated[float, within(
+        0.0, FLIGHT_MAX_S, "s: an hour of hovering outlasts any battery of the class",
+        lo_open=True)] = 60.0
     # land after holding this long without a motion command [s]; tuned for experiments
     # driven from a notebook (a minute to type the next command)
-    speed_m_s: PositiveFloat = 0.5
+    speed_m_s: Speed = 0.5
     # mean speed of a go-to without a duration [m/s]; the take-off's climb speed
-    arrival_tolerance_m: PositiveFloat = 0.05
+    arrival_tolerance_m: LabLength = 0.05
     # a motion has arrived once its reference is at rest and the estimate this close [m]
     plan_timeout_s: float = Field(5.0, gt=0, le=60.0)
     # longest a motion request may take to plan [s] (in the planner process, off the
@@ -835,10 +1296,17 @@ def _parse_yaml(raw: bytes, source: str) -> Any:
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        line = raw[:exc.start].count(b"\n") + 1
-        raise ConfigError(f"{source}:{line}: not UTF-8 text (byte 0x{raw[exc.start]:02x}): "
+        where = _line_column(raw[:exc.start].decode("utf-8"))
+        raise ConfigError(f"{source}:{where}: not UTF-8 text (byte 0x{raw[exc.start]:02x}): "
                           "save the file as UTF-8") from None
-    loader = _Loader(text)
+    try:
+        loader = _Loader(text)  # refuses characters YAML does not allow, all at once
+    except ReaderError as exc:
+        code = exc.character if isinstance(exc.character, int) else ord(exc.character)
+        name = " (a NUL byte)" if code == 0 else ""
+        raise ConfigError(f"{source}:{_line_column(text[:exc.position])}: not valid YAML: "
+                          f"character U+{code:04X}{name} is not allowed (YAML refuses "
+                          "control characters other than tab and line breaks)") from None
     try:
         node = loader.get_single_node()
         if node is None:
@@ -856,6 +1324,12 @@ def _parse_yaml(raw: bytes, source: str) -> Any:
         raise ConfigError(f"{source}: not valid YAML: nested too deeply") from None
     finally:
         loader.dispose()
+
+
+def _line_column(before: str) -> str:
+    """``LINE:COLUMN`` (both from 1, the column in characters) of the character that
+    follows the text ``before``, as editors count them."""
+    return f"{before.count(chr(10)) + 1}:{len(before) - before.rfind(chr(10))}"
 
 
 def _clip(value: object, chars: int = 1000) -> str:

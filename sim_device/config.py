@@ -10,91 +10,147 @@ lab's code the validated section of a loaded configuration.
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import Field
+from pydantic import AfterValidator, Field
 
 from groundstation.config import (
+    DAY_S,
+    VICON_RATE_MAX_HZ,
+    CommandDelay,
     ConfigModel,
+    FifoPriority,
+    FilePath,
     GroundStationConfig,
-    NonNegFloat,
-    PositiveFloat,
-    Vec3,
+    HostAddress,
+    LabCoordinate,
+    TurnDeg,
+    within,
 )
+
+Probability = Annotated[float, within(0.0, 1.0, "a probability")]
+SimTime = Annotated[float, within(0.0, DAY_S, "s: a simulated flight lasts less than a day")]
+DeliveryDelay = Annotated[float, within(
+    0.0, 60.0, "s: a frame a minute late is a lost link 30 times over (safety.link_loss_s "
+    "<= 2 s)")]
+TrueOverModel = Annotated[float, within(
+    0.1, 10.0, "true / model: a factor of 10 either way is another vehicle, not a model "
+    "error")]
+
+
+def _ordered(value: tuple[float, float]) -> tuple[float, float]:
+    if not value[0] < value[1]:
+        raise ValueError("volume bounds must be (min, max) with min < max")
+    return value
+
+
+LiftScale = Annotated[float, within(
+    0.0, 10.0, "true / model lift: 0 is a total loss, ten times is another vehicle")]
+LabBounds = Annotated[tuple[LabCoordinate, LabCoordinate], AfterValidator(_ordered)]
+"""A volume's (min, max) along one axis, NED [m]."""
 
 
 class SimFaultsConfig(ConfigModel):
     """Fault injection in the virtual X-3D link, all off by default."""
 
-    corruption_rate: float = Field(0.0, ge=0.0, le=1.0)  # probability per byte of a bit flip
-    drop_rate: float = Field(0.0, ge=0.0, le=1.0)  # probability per DATA frame of dropping it
-    stall_at_s: NonNegFloat | None = None  # DATA stream stalls at this simulated time
-    stall_duration_s: NonNegFloat = 0.0
-    burst_delay_s: NonNegFloat = 0.0  # hold DATA and deliver it in bursts of this length
-    delay_s: NonNegFloat = 0.0  # constant extra delivery delay of every DATA frame
-    thrust_faults: list[tuple[NonNegFloat, NonNegFloat, NonNegFloat]] = Field(
-        default_factory=list)
+    corruption_rate: Probability = 0.0  # probability per byte of a bit flip
+    drop_rate: Probability = 0.0  # probability per DATA frame of dropping it
+    stall_at_s: SimTime | None = None  # DATA stream stalls at this simulated time
+    stall_duration_s: SimTime = 0.0
+    burst_delay_s: DeliveryDelay = 0.0  # hold DATA and deliver it in bursts of this length
+    delay_s: DeliveryDelay = 0.0  # constant extra delivery delay of every DATA frame
+    thrust_faults: list[tuple[SimTime, SimTime, LiftScale]] = Field(default_factory=list)
     # (start_s, duration_s, lift_scale): the rotors give lift_scale x their lift meanwhile
 
 
 class SimViconConfig(ConfigModel):
     """The virtual Vicon sender."""
 
-    target_address: str = "127.0.0.1"  # loopback: never send outside this machine
-    rate_hz: PositiveFloat = 100.0  # thesis lab 100 Hz; Ch. 11.1 also flew 10 and 1 Hz
-    latency_s: NonNegFloat = 0.005  # matches vicon.latency_s default
+    target_address: HostAddress = "127.0.0.1"  # loopback: never send outside this machine
+    rate_hz: Annotated[float, within(
+        0.0, VICON_RATE_MAX_HZ, "Hz: Vicon cameras stream at most ~2000 Hz",
+        lo_open=True)] = 100.0  # thesis lab 100 Hz; Ch. 11.1 also flew 10 and 1 Hz
+    latency_s: Annotated[float, within(
+        0.0, 0.5, "s: spec: Tracker and the network add a few ms")] = 0.005
+    # matches vicon.latency_s default
     noise: bool = True  # Table 6.1 variances from the vehicle section
     angle_noise: bool = True
     # false: exact angles, noise on the position only, as a simulator's Vicon sender (a
     # level vehicle at heading 0 reports rotation exactly (0, 0, 0))
     loss_encoding: Literal["missing", "zero", "held-identity"] = "held-identity"
     # spec "lost tracking" encodings; held-identity is the thesis lab's (Alg. 2)
-    outages: list[tuple[float, float]] = Field(default_factory=list)  # (start_s, duration_s)
-    tilt_limit_deg: PositiveFloat = 60.0  # tracking lost beyond this tilt; markers occluded
-    pad_to: int | None = Field(1024, ge=80)  # Tracker's data block size (spec)
-    volume_x: tuple[float, float] = (-1.5, 1.5)  # tracked volume, Table B.1 [m]
-    volume_y: tuple[float, float] = (-1.5, 1.5)  # Table B.1
-    volume_z: tuple[float, float] = (-2.0, 0.05)  # Table B.1: 0..2 m height, NED
+    outages: list[tuple[SimTime, SimTime]] = Field(default_factory=list)
+    # (start_s, duration_s)
+    tilt_limit_deg: Annotated[float, within(0.0, 180.0, "deg: a tilt is at most 180",
+                                            lo_open=True)] = 60.0
+    # tracking lost beyond this tilt; markers occluded
+    pad_to: Annotated[int, within(
+        80, 65507, "bytes: from one object item with the header (spec) to the largest "
+        "UDP/IPv4 payload")] | None = 1024  # Tracker's data block size (spec)
+    volume_x: LabBounds = (-1.5, 1.5)  # tracked volume, Table B.1 [m]
+    volume_y: LabBounds = (-1.5, 1.5)  # Table B.1
+    volume_z: LabBounds = (-2.0, 0.05)  # Table B.1: 0..2 m height, NED
 
 
 class SimConfig(ConfigModel):
     """The virtual lab's ``sim:`` section: plant, sensors, link and Vicon."""
 
-    seed: int = 1
-    dt_s: float = Field(0.002, gt=0, le=0.01)  # 2 ms fixed step, issue 5 (rate loop, motors)
-    fifo_priority: int | None = Field(None, ge=1, le=98)
+    seed: Annotated[int, within(0, None, "numpy's generators take no negative seed")] = 1
+    dt_s: Annotated[float, within(
+        0.0, 0.01, "s: the plant's fixed step; coarser than the 10 ms IMU period cannot "
+        "resolve the rate loop and the motors", lo_open=True)] = 0.002
+    # 2 ms fixed step, issue 5 (rate loop, motors)
+    fifo_priority: FifoPriority | None = None
     # SCHED_FIFO priority of the real-time virtual lab (null: the normal policy). 20
     # makes it stand for hardware that the PC's load never stalls (benchmarks/
     # bench_flight.py), but it costs the daemon on the same cores: in a demo flight
     # without the PM QoS request the daemon's DATA->COMMAND p99 rose from 2 to 13 ms
     # Where the simulated vehicle differs from the vehicle model (all off by default:
     # the virtual lab is then the design model; `gs eval --perturb` draws them)
-    rate_loop_tau_s: NonNegFloat | None = None
+    rate_loop_tau_s: Annotated[float, within(
+        0.0, 1.0, "s: 0 is an ideal rate loop; one slower than a second could not hold a "
+        "hover")] | None = None
     # true rate-loop time constant; null = vehicle.rate_loop_tau_s; 0 = an ideal rate loop
-    command_delay_s: NonNegFloat | None = None  # true transport delay; null = the vehicle's
-    k_rate_scale: Vec3 = Field(default_factory=lambda: [1.0, 1.0, 1.0])
+    command_delay_s: CommandDelay | None = None  # true transport delay; null = the vehicle's
+    k_rate_scale: list[TrueOverModel] = Field(default_factory=lambda: [1.0, 1.0, 1.0],
+                                              min_length=3, max_length=3)
     # true rate gains / vehicle.k_rate, per axis (1.3 = a 30 % stronger rate response)
-    mass_scale: PositiveFloat = 1.0  # true mass / vehicle.mass_kg
-    motor_tau_s: NonNegFloat = 0.02
+    mass_scale: TrueOverModel = 1.0  # true mass / vehicle.mass_kg
+    motor_tau_s: Annotated[float, within(
+        0.0, 1.0, "s: motors slower than a second could not hold a hover")] = 0.02
     # lift lag of motors and rotors; the thesis gives none, 20 ms is typical of the class
-    battery_droop: float = Field(0.03, ge=0.0, lt=0.5)
+    battery_droop: Annotated[float, within(
+        0.0, 0.5, "a fraction of the lift: half of it lost is an empty battery",
+        hi_open=True)] = 0.03
     # lift loss fraction over battery_droop_time_s (Ch. 5.2 observed a growing offset)
-    battery_droop_time_s: PositiveFloat = 300.0
-    thrust_scale: PositiveFloat = 1.0  # true lift / polynomial lift; 0.9 = 10 % thrust error
-    gyro_bias: Vec3 = Field(default_factory=lambda: [0.01, -0.02, 0.005])  # rad/s, plausible
-    acc_bias: Vec3 = Field(default_factory=lambda: [0.05, -0.05, 0.1])  # m/s^2, plausible
-    scale_error: NonNegFloat = 0.02  # max per-axis IMU scale error fraction ("a few %")
-    initial_position: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])  # on the floor
-    initial_yaw_deg: float = 0.0
-    pilot_thrust: int = Field(0, ge=0, le=4096)
+    battery_droop_time_s: Annotated[float, within(
+        0.0, DAY_S, "s: a simulated flight lasts less than a day", lo_open=True)] = 300.0
+    thrust_scale: TrueOverModel = 1.0  # true lift / polynomial lift; 0.9 = 10 % thrust error
+    gyro_bias: list[Annotated[float, within(
+        -1.0, 1.0, "rad/s: a MEMS gyro's zero-rate offset is a few deg/s; 1 rad/s is 57")]] \
+        = Field(default_factory=lambda: [0.01, -0.02, 0.005], min_length=3, max_length=3)
+    # rad/s, plausible
+    acc_bias: list[Annotated[float, within(
+        -5.0, 5.0, "m/s^2: a MEMS accelerometer's zero-g offset is at most ~0.1 g; 5 m/s^2 "
+        "is half a g")]] \
+        = Field(default_factory=lambda: [0.05, -0.05, 0.1], min_length=3, max_length=3)
+    # m/s^2, plausible
+    scale_error: Annotated[float, within(
+        0.0, 0.5, "a fraction: a scale 50 % off is a wrong Table 6.2, not an error")] = 0.02
+    # max per-axis IMU scale error fraction ("a few %")
+    initial_position: list[LabCoordinate] = Field(default_factory=lambda: [0.0, 0.0, 0.0],
+                                                  min_length=3, max_length=3)  # on the floor
+    initial_yaw_deg: TurnDeg = 0.0
+    pilot_thrust: Annotated[int, within(0, 4096, "stick units: the thrust stick's range")] = 0
     # scripted pilot's thrust stick when it has the vehicle (0 = motors idle on the ground)
     serial_enable: bool = True  # the RC serial-enable switch
     pilot_holds_thrust: bool = True
     # a pilot handed the vehicle in the air holds the thrust applied at that moment
     rc_link: bool = True
-    battery_mv: int = Field(11800, ge=0)  # reported in STATUS (3S LiPo, spec worked frame)
-    truth_file: Path | None = None  # ground truth written here on exit
+    battery_mv: Annotated[int, within(
+        0, 65535, "mV: STATUS carries it as uint16 (spec section 3.3)")] = 11800
+    # reported in STATUS (3S LiPo, spec worked frame)
+    truth_file: FilePath | None = None  # ground truth written here on exit
     faults: SimFaultsConfig = SimFaultsConfig()
     vicon: SimViconConfig = SimViconConfig()
 
