@@ -1211,11 +1211,15 @@ class ApiConfig(ConfigModel):
     # mean speed of a go-to without a duration [m/s]; the take-off's climb speed
     arrival_tolerance_m: LabLength = 0.05
     # a motion has arrived once its reference is at rest and the estimate this close [m]
-    plan_timeout_s: float = Field(5.0, gt=0, le=60.0)
+    plan_timeout_s: Annotated[float, within(
+        0.0, 60.0, "s: the longest motion plans in about 2 s; a minute's wait is a hung "
+        "planner", lo_open=True)] = 5.0
     # longest a motion request may take to plan [s] (in the planner process, off the
     # flight loop): a plan not made by then is refused and the planner restarted. The
     # longest motion (600 s) takes about 2 s on the project's VM
-    start_horizon_s: float = Field(300.0, gt=0, le=3600.0)
+    start_horizon_s: Annotated[float, within(
+        0.0, FLIGHT_MAX_S, "s: a start beyond an hour outlasts any battery of the class",
+        lo_open=True)] = 300.0
     # how far from now a follow's start_at may be [s]; a few minutes to line up clients
 
 
