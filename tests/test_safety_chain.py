@@ -16,6 +16,7 @@ In-process on the simulated clock, the Vicon stream tracked well beyond the flig
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -108,4 +109,41 @@ def test_a_reference_beyond_what_the_check_allowed_is_a_fault_not_an_input() -> 
     tilt = [2.0 * math.degrees(math.asin(min(1.0, float(np.linalg.norm(q[1:3])))))
             for q in result.trace["true_q"]]
     assert max(tilt) < 15.0
+    assert disarmed_height(result) < 0.1
+
+
+def helix_csv(path: Path, *, hz: float = 100.0, noise_m: float = 5e-4, seed: int = 21) -> Path:
+    """The file that flew away: a helix of radius 0.5 m at 0.7 m/s rising 0.3 m, heading
+    along the motion (yaw in degrees, wrapped to +-180 as a tool writes angles), sampled
+    at ``hz`` with ``noise_m`` of Gaussian noise on every coordinate, as numpy writes it."""
+    rng = np.random.default_rng(seed)
+    r, speed, rise = 0.5, 0.7, 0.3
+    w = speed / r
+    period = 2.0 * math.pi / w
+    t = np.arange(0.0, period + 0.5 / hz, 1.0 / hz)
+    x = r * np.cos(w * t) - r
+    y = r * np.sin(w * t)
+    z = -1.0 - rise * t / period
+    yaw = np.degrees(np.arctan2(np.cos(w * t), -np.sin(w * t)))  # along the velocity
+    noisy = np.column_stack([x, y, z]) + rng.normal(0.0, noise_m, (t.size, 3))
+    rows = np.column_stack([t, noisy, (yaw + 180.0) % 360.0 - 180.0])
+    np.savetxt(path, rows, delimiter=",", header="t,x,y,z,yaw_deg", comments="", fmt="%.6f")
+    return path
+
+
+def test_the_noisy_dense_helix_that_flew_away_is_flown_on_its_curve(tmp_path: Path) -> None:
+    """The whole chain on the file of the fly-away: it is read as samples of a curve (not
+    corners passed at rest), its feed-forward stays within the envelope, nothing fails
+    safe, and the truth follows the helix within centimetres, inside the volume."""
+    cfg = sim_config(**{"trajectory.name": "waypoints",
+                        "trajectory.file": str(helix_csv(tmp_path / "helix.csv")),
+                        **TRACKED_FAR})
+    result = fly_in_process(cfg, max_time_s=60.0)
+    assert result.final_state is State.DONE and result.success, result.transitions
+    track = result.during(State.TRACK)
+    error = np.linalg.norm(result.trace["true_pos"][track] - result.trace["ref_pos"][track],
+                           axis=1)
+    assert np.sqrt(np.mean(error**2)) < 0.03 and error.max() < 0.08
+    assert excursion(cfg, result) == 0.0
+    assert (-result.trace["true_pos"][:, 2]).max() < 1.45  # 1.3 m at the top of the helix
     assert disarmed_height(result) < 0.1
