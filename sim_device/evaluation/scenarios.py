@@ -32,12 +32,20 @@ shaped references (``trajectory.shaping: min-jerk``), at several headings:
 * the H-infinity design with the rate-loop lag on a plant whose rate gains are 30 %
   low and 30 % high (under ``--perturb`` the rest of the plant is drawn as for every
   other flight).
+
+Trajectory files (:data:`FILES`), ``lqr-ff`` with Vicon at 10 Hz, each flown once and
+scored over the whole of tracking (``settle_s`` 0: the file starts at rest where the
+take-off ends): the figure-eight 1.2 m x 0.6 m as a dense waypoint CSV written by numpy
+every 20 ms (``data/eight_8s_50hz.csv``, ``data/eight_4s_50hz.csv``: 8 s and 4 s a
+lap; fitted with a spline and eased in and out) and the Crazyflie examples' figure8.csv
+(polynomial segments, ``data/figure8.csv``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -75,6 +83,9 @@ EIGHT = {"trajectory.size_m": 1.2, "trajectory.period_s": 8.0}
 The issue asks the design to stand rate gains 30 % off; it has no integral action, so
 the drawn mass and thrust errors would only show that (a height offset, or a take-off
 that never reaches its height)."""
+
+DATA = Path(__file__).resolve().parent / "data"
+"""The trajectory files the file scenarios fly."""
 
 TAKEOFF_OFFSET_M = (0.02, 0.0)
 """Where the take-off at heading 135 degrees starts, off the hover point's x/y [m]."""
@@ -184,8 +195,27 @@ def _issue13() -> list[Scenario]:
     return out
 
 
+def _files() -> list[Scenario]:
+    """Trajectory files as users bring them (see the module doc)."""
+    out = [Scenario(f"file-eight-{period:g}s", "trajectory-files",
+                    f"Figure-eight 1.2 m x 0.6 m as a dense CSV (50 Hz), {period:g} s a lap, "
+                    "once", "waypoint file", "waypoints", "lqr-ff", period,
+                    overrides={**SHAPED,
+                               "trajectory.file": str(DATA / f"eight_{period:g}s_50hz.csv")},
+                    settle_s=0.0)
+           for period in (8.0, 4.0)]
+    figure8 = DATA / "figure8.csv"
+    lap = float(np.sum(np.loadtxt(figure8, delimiter=",", skiprows=1, usecols=0)))
+    out.append(Scenario("file-figure8", "trajectory-files",
+                        "The Crazyflie figure8.csv (polynomial segments, 2 m x 1.1 m, 7.3 s), "
+                        "once", "polynomial file", "waypoints", "lqr-ff", lap,
+                        overrides={**SHAPED, "trajectory.file": str(figure8)},
+                        settle_s=0.0))
+    return out
+
+
 def _suite() -> tuple[Scenario, ...]:
-    return (*_thesis(), *_issue13())
+    return (*_thesis(), *_issue13(), *_files())
 
 
 SUITE: tuple[Scenario, ...] = _suite()
@@ -196,6 +226,9 @@ THESIS: tuple[str, ...] = tuple(s.name for s in _thesis())
 
 ISSUE13: tuple[str, ...] = tuple(s.name for s in _issue13())
 """The names of issue 13's flights."""
+
+FILES: tuple[str, ...] = tuple(s.name for s in _files())
+"""The names of the trajectory-file flights."""
 
 
 def select(names: Sequence[str] | None = None) -> tuple[Scenario, ...]:

@@ -49,6 +49,9 @@ TARGETS: dict[str, tuple[Target, ...]] = {
     "hinf-rate-loop-model": _HINF,
     "hinf-rate-gains-low": _HINF,
     "hinf-rate-gains-high": _HINF,
+    "file-eight-8s": (Target("rms_m", 0.010, "dense CSV eight, 8 s a lap: <= 1 cm RMS"),),
+    "file-eight-4s": (Target("rms_m", 0.025, "dense CSV eight, 4 s a lap: <= 2.5 cm RMS"),),
+    "file-figure8": (Target("rms_m", 0.025, "Crazyflie figure8.csv: <= 2.5 cm RMS"),),
 }
 """Issue 13's targets by scenario name."""
 
