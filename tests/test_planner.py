@@ -205,6 +205,21 @@ def test_closing_ends_a_plan_under_way() -> None:
     assert planner.pid is None
 
 
+def test_a_planner_closed_while_it_starts_ends_quietly(capfd: pytest.CaptureFixture[str]
+                                                       ) -> None:
+    """Closed before it has imported (a flight that ends at once): reaped, and nothing on
+    stderr (it writes to the daemon's)."""
+    planner = PlannerProcess(SETTINGS, timeout_s=30.0)
+    planner.start()
+    pid = planner.pid
+    planner.close()
+    assert pid is not None
+    with pytest.raises(ChildProcessError):
+        os.waitpid(pid, os.WNOHANG)
+    time.sleep(0.2)
+    assert capfd.readouterr().err == ""
+
+
 def test_the_planner_runs_at_normal_priority_in_a_process_group_of_its_own() -> None:
     """The daemon's threads run SCHED_FIFO in the air; its planner must not: a plan at
     real-time priority would compete with the loop for a core. Started from a SCHED_FIFO

@@ -279,15 +279,11 @@ def serve(fd: int) -> None:
     try:
         sys.path[:] = conn.recv()
         settings: PlannerSettings = conn.recv()
-    except EOFError:
+        conn.send(("ready", os.getpid()))
+        while True:
+            conn.send_bytes(_answer(conn.recv_bytes(), settings))
+    except (EOFError, OSError):  # the daemon closed its end (or went away): done, quietly
         return
-    conn.send(("ready", os.getpid()))
-    while True:
-        try:
-            message = conn.recv_bytes()
-        except (EOFError, OSError):
-            return
-        conn.send_bytes(_answer(message, settings))
 
 
 def _answer(message: bytes, settings: PlannerSettings) -> bytes:
