@@ -5,8 +5,13 @@ reference whose acceleration is continuous wherever the vehicle flies it.
 :func:`shape_for_flight` (``trajectory.shaping: min-jerk``) makes every
 trajectory so:
 
-* :class:`MinJerkPath`: the knots of a :class:`PiecewiseLinear` (square,
-  rectangle, waypoints) at the same knot times, each segment flown along its
+* Dense samples (a :class:`PiecewiseLinear` whose knots are closer than the vehicle
+  can stop between, :func:`~groundstation.control.splines.dense_rule`): the smooth
+  curve fitted through them (:func:`fit_if_dense`,
+  :mod:`~groundstation.control.splines`), whatever ``trajectory.shaping`` says: a
+  file of samples means that curve.
+* :class:`MinJerkPath`: the knots of a :class:`PiecewiseLinear` of corners (square,
+  rectangle, sparse waypoints) at the same knot times, each segment flown along its
   straight line with a quintic time-scaling (:class:`~groundstation.control.minjerk.Quintic`):
   the speed is 0 at a knot where the direction changes and continuous through a
   knot where it does not (collinear segments), the acceleration 0 at every knot,
@@ -20,8 +25,14 @@ trajectory so:
 
       p' = f' s1,   p'' = f'' s1^2 + f' s2,   p''' = f''' s1^3 + 3 f'' s1 s2 + f' s3
 
-  (``s1, s2, s3`` the derivatives of ``sigma``). The ramp is chosen so the extra
-  acceleration ``|f'| s2`` fits in the acceleration the tilt limit leaves.
+  (``s1, s2, s3`` the derivatives of ``sigma``). The ramp is the shortest (from
+  1 s) whose eased start and end ask at most 90 % of the acceleration the tilt limit
+  allows. Curves (fitted samples, polynomial files) are eased even with
+  ``shaping: none``: a path is never refused for starting or ending in motion.
+
+Every shaped trajectory describes itself in pieces (``pieces``: polynomial segments,
+closed forms, the ease by the chain rule; :mod:`~groundstation.control.curve`) for
+the feasibility check, and in words (:func:`describe`).
 
 Set-point steps (:class:`~groundstation.control.trajectory.Hover` with a step)
 are left alone: they are the step-response test.
@@ -325,7 +336,7 @@ def ease_ramp_s(base: Trajectory, span_s: float, max_accel: float, *,
     if not math.isfinite(longest):
         raise TrajectoryError(f"trajectory {base.name!r}: its speed or acceleration is not "
                               "finite")
-    target = max(0.9 * max_accel, a_max if sets is None else 0.0)
+    target = max(0.9 * max_accel, a_max)
     ramp = min_ramp_s
     while ramp < min(longest, span_s):
         warp = TimeWarp(base, span_s, ramp)
