@@ -285,9 +285,11 @@ def _m(v: float) -> str:
 
 
 def _at(pk: Peak) -> str:
-    """The start of a refusal line: the time and the point."""
+    """The start of a refusal line: the time (to the centisecond, or three digits below
+    10 ms) and the point."""
     x, y, z = pk.position
-    return f"at t = {pk.t:.2f} s, ({_m(x)}, {_m(y)}, {_m(z)}) m: "
+    when = f"{pk.t:.3g}" if 0.0 < abs(pk.t) < 0.01 else f"{pk.t:.2f}"
+    return f"at t = {when} s, ({_m(x)}, {_m(y)}, {_m(z)}) m: "
 
 
 def _how_many(pk: Peak) -> str:
@@ -307,8 +309,10 @@ def _shown(pk: Peak, limit: float, fmt: Callable[[float], str], sign: float = 1.
     """The peak's value for a refusal; where only the proven bound breaks the limit (no
     sample does), both."""
     if pk.value <= limit < pk.upper:
-        return f"{fmt(sign * pk.value)} (up to {fmt(sign * pk.upper)} between samples)"
-    return fmt(sign * pk.value)
+        bound = "up to" if sign > 0 else "as little as"
+        return (f"{fmt(sign * pk.value + 0.0)} ({bound} {fmt(sign * pk.upper + 0.0)} between "
+                "samples)")  # + 0.0: no minus sign on a zero
+    return fmt(sign * pk.value + 0.0)
 
 
 def _problems(r: Reading, lim: FlightLimits) -> list[str]:

@@ -118,6 +118,8 @@ class _Quantity:
     cap: Callable[[PieceBounds], FloatArray] | None = None
     """A bound of the quantity on the whole piece, if it has one (a coordinate: the
     piece's box), which the interval bounds never exceed."""
+    most: float = math.inf
+    """The largest value the quantity can take at all (minus a norm: 0; a tilt: pi)."""
 
 
 def _coordinate(axis: int, sign: float) -> _Quantity:
@@ -137,8 +139,8 @@ QUANTITIES: tuple[_Quantity, ...] = (
     _Quantity("lift_max", lambda v, s: norm(v.force(s)),
               lambda v, b, f, h: _lift_slope(v, b), 1e-3),
     _Quantity("lift_min", lambda v, s: -norm(v.force(s)),
-              lambda v, b, f, h: _lift_slope(v, b), 1e-3),
-    _Quantity("tilt", tilt_angle, _tilt_slope, 1e-5),
+              lambda v, b, f, h: _lift_slope(v, b), 1e-3, most=0.0),
+    _Quantity("tilt", tilt_angle, _tilt_slope, 1e-5, most=math.pi),
     _Quantity("tilt_rate", tilt_rate_of, _tilt_rate_slope, 1e-3),
 )
 _BY_NAME = {q.name: q for q in QUANTITIES}
@@ -236,6 +238,7 @@ def _maximise(curve: _Curve, grid: Samples, grid_piece: np.ndarray, veh: Vehicle
         upper = np.where(np.isnan(upper), math.inf, upper)
         if q.cap is not None:
             upper = np.minimum(upper, np.maximum(q.cap(b_int), np.maximum(qa, qb)))
+        upper = np.minimum(upper, q.most)
         tol = max(q.tol, 1e-4 * abs(best))
         need = upper > best + tol
         if limit is not None and best <= limit:
@@ -450,10 +453,13 @@ def slowdown(veh: Vehicle, name: str, pk: Peak, limit: float) -> float | None:
         return None
     q = _BY_NAME[name]
     pts = pk.worst
-    lo, hi = np.ones(len(pts)), np.full(len(pts), 1e6)
+    if name in ("speed", "yaw_rate"):  # homogeneous of degree -1 in k: exact
+        k = float(np.max(q.value(veh, pts))) / limit
+        return math.ceil(k * 100.0 - 1e-9) / 100.0
+    lo, hi = np.ones(len(pts)), np.full(len(pts), 1e12)
     if np.any(q.value(veh, scaled(pts, hi)) > limit):
         return None
-    for _ in range(80):
+    for _ in range(100):
         mid = np.sqrt(lo * hi)
         ok = q.value(veh, scaled(pts, mid)) <= limit
         lo, hi = np.where(ok, lo, mid), np.where(ok, mid, hi)
