@@ -299,6 +299,9 @@ def _how_many(pk: Peak) -> str:
 
 
 def _slow_text(veh: Vehicle, name: str, pk: Peak, limit: float) -> str:
+    if pk.value <= limit:  # no sample beyond it: only the bound between samples is
+        return "it comes so close to the limit that it cannot be shown within it: slow it " \
+            "down a little"
     k = slowdown(veh, name, pk, limit)
     if k is None:
         return "slowing it down does not help"

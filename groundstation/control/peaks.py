@@ -213,6 +213,26 @@ def _earliest_best(values: FloatArray, times: FloatArray, tol: float) -> int:
     return int(near[np.argmin(times[near])])
 
 
+def _upper(curve: _Curve, veh: Vehicle, q: _Quantity, a: FloatArray, b: FloatArray,
+           ends: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+           piece: np.ndarray) -> FloatArray:
+    """Proven bound of ``q`` on each interval ``[a, b]`` of ``piece`` from its values
+    ``qa, qb`` and lifts ``fa, fb`` at the ends (``ends``): ``(qa + qb + L h) / 2``,
+    within the piece's cap and the quantity's most; inf where nothing is proven."""
+    qa, qb, fa, fb = ends
+    h = b - a
+    bounds = curve.bounds.take(piece)
+    fmin = np.minimum(fa, fb) - _lift_slope(veh, bounds) * h / 2.0
+    with np.errstate(invalid="ignore"):
+        upper = np.where(h > 0.0, 0.5 * (qa + qb) + 0.5 * q.slope(veh, bounds, fmin, h) * h,
+                         np.maximum(qa, qb))
+    upper = np.where(np.isnan(upper), math.inf, upper)
+    if q.cap is not None:
+        upper = np.minimum(upper, np.maximum(q.cap(bounds), np.maximum(qa, qb)))
+    out: FloatArray = np.minimum(upper, q.most)
+    return out
+
+
 def _maximise(curve: _Curve, grid: Samples, grid_piece: np.ndarray, veh: Vehicle,
               q: _Quantity, limit: float | None) -> Peak:
     """The peak of ``q`` over the curve by branch and bound (see the module doc), starting
@@ -228,22 +248,14 @@ def _maximise(curve: _Curve, grid: Samples, grid_piece: np.ndarray, veh: Vehicle
     best = float(np.max(values))
     proven = -math.inf
     spent = 0
-    for _ in range(200):
-        h = b - a
-        b_int = curve.bounds.take(piece)
-        fmin = np.minimum(fa, fb) - _lift_slope(veh, b_int) * h / 2.0
-        slope = q.slope(veh, b_int, fmin, h)
-        with np.errstate(invalid="ignore"):
-            upper = np.where(h > 0.0, 0.5 * (qa + qb) + 0.5 * slope * h, np.maximum(qa, qb))
-        upper = np.where(np.isnan(upper), math.inf, upper)
-        if q.cap is not None:
-            upper = np.minimum(upper, np.maximum(q.cap(b_int), np.maximum(qa, qb)))
-        upper = np.minimum(upper, q.most)
+    while True:
+        upper = _upper(curve, veh, q, a, b, (qa, qb, fa, fb), piece)
         tol = max(q.tol, 1e-4 * abs(best))
         need = upper > best + tol
         if limit is not None and best <= limit:
             need |= upper > limit
-        need &= h > 1e-9 * np.maximum(1.0, np.abs(b))
+        # an interval narrower than a nanosecond (relative) is not split: its bound stands
+        need &= (b - a) > 1e-9 * np.maximum(1.0, np.abs(b))
         if np.any(~need):
             proven = max(proven, float(np.max(upper[~need])))
         if not np.any(need) or spent + int(np.count_nonzero(need)) > BUDGET:
@@ -272,12 +284,12 @@ def _maximise(curve: _Curve, grid: Samples, grid_piece: np.ndarray, veh: Vehicle
     offset = k - int(sum(len(x) for x in seen_q[:chunk]))
     where = seen[chunk].take(np.array([offset]))
     peak = Peak(value=best, t=float(all_t[k]), position=where.position[0].copy(),
-                 upper=max(proven, best), total=n, unit="pieces", worst=where)
+                upper=max(proven, best), total=n, unit="pieces", worst=where)
     if limit is not None and peak.upper > limit:
         over = np.zeros(n)
         np.maximum.at(over, all_piece, np.where(all_q > limit, 1.0, 0.0))
         peak.count = int(np.count_nonzero(over)) or 1
-        peak.worst = _worst_samples(seen, all_q, all_piece, limit)
+        peak.worst = _worst_samples(seen, all_q, all_piece, limit) or where
     return peak
 
 
