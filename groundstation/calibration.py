@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from scipy.stats import t as student_t
 
 from groundstation.asctec.dialect import open_link
 from groundstation.config import GroundStationConfig
@@ -37,14 +38,26 @@ from groundstation.vicon.client import ViconClient
 
 MOVING_POSITION_M = 0.005
 """At rest, the mean Vicon position of a fifth of the measurement stays this close to the
-first fifth's [m] (Table 6.1's noise, averaged, is far below)."""
+first fifth's [m] (Table 6.1's noise, averaged, is far below), or within what the measured
+noise reaches (:data:`STILL_FALSE_ALARM`), whichever is larger."""
 MOVING_ATTITUDE_DEG = 1.0
 """At rest, the mean Vicon attitude of a fifth of the measurement stays this close to the
-first fifth's [deg]."""
+first fifth's [deg], or within what the measured noise reaches, whichever is larger."""
 MOVING_GYRO_RAD_S = 0.05
-"""At rest, the gyro's mean over a fifth of the measurement stays this close to the whole
-measurement's [rad/s] (Table 6.3's noise averages to a few mrad/s; a hand turning the
-vehicle moves it by tenths)."""
+"""At rest, the gyro's mean over a fifth of the measurement stays this close to the first
+fifth's [rad/s] (Table 6.3's noise averages to a few mrad/s; a hand turning the vehicle
+moves it by tenths), or within what the measured noise reaches, whichever is larger."""
+STILL_FALSE_ALARM = 1e-6
+"""Chance that white sensor noise alone makes a vehicle at rest look moved. A short
+measurement of a noisy sensor has noisy window means (Vicon at 16 times Table 6.1's
+attitude variance, 2 s at 80 Hz: 0.15 to 0.25 deg per axis, so a fixed 1 deg refused one
+measurement at rest in 25); the limit grows with the noise so that this never happens.
+How: a difference of two window means, one axis, divided by its standard deviation
+estimated from the scatter inside the windows, is Student-t with N - 5 degrees of freedom
+(white Gaussian noise: the scatter is independent of the means). If the norm of a
+difference exceeds z times its estimated standard deviation, some axis exceeds z times its
+own, so over d axes and 4 comparisons the chance is at most 4 d * 2 * t_sf(z, N - 5)
+(Bonferroni), and z is chosen so that this bound is the rate."""
 REST_FORCE_TOLERANCE = 0.2
 """At rest the accelerometer reads g within this fraction even through the configured
 (perhaps uncalibrated) zeros and scales."""
@@ -237,32 +250,58 @@ def _windows(values: FloatArray, n: int = 5) -> list[FloatArray]:
     return [w for w in np.array_split(np.asarray(values, dtype=float), n) if len(w)]
 
 
+def _change_and_limit(windows: list[FloatArray], floor: float) -> tuple[float, float]:
+    """(largest change of a window's mean from the first window's, the change allowed at
+    rest). ``windows``: (n_i, d) samples each; the allowed change is the larger of
+    ``floor`` and what noise alone reaches with :data:`STILL_FALSE_ALARM`, from the
+    scatter inside the windows (so a slow drift does not inflate it)."""
+    means = np.array([w.mean(axis=0) for w in windows])
+    dof = sum(len(w) - 1 for w in windows)
+    if dof < 1 or len(windows) < 2:
+        return 0.0, floor
+    scatter = sum(((w - w.mean(axis=0)) ** 2).sum(axis=0) for w in windows)
+    variance = np.asarray(scatter, dtype=float) / dof  # (d,) per sample
+    tests = 2 * means.shape[1] * (len(windows) - 1)  # two-sided, per axis and comparison
+    z = float(student_t.isf(STILL_FALSE_ALARM / tests, dof))
+    change, limit = 0.0, floor
+    for w, m in zip(windows[1:], means[1:], strict=True):
+        sd = math.sqrt(float(variance.sum()) * (1.0 / len(w) + 1.0 / len(windows[0])))
+        change = max(change, float(np.linalg.norm(m - means[0])))
+        limit = max(limit, z * sd)
+    return change, limit
+
+
+def _rotation_vectors(quaternions: FloatArray) -> FloatArray:
+    """(N, 3) rotation vectors [rad] of (N, 4) scalar-first quaternions about their mean
+    rotation: R_j = exp(v_j) R_mean, so differences of means are small angles [rad]."""
+    aligned = _aligned_quaternions(quaternions)
+    rotations = Rotation.from_quat(np.roll(aligned, -1, axis=1))  # scipy is scalar-last
+    return np.asarray((rotations * _mean_rotation(aligned).inv()).as_rotvec(), dtype=float)
+
+
 def _check_still(positions: FloatArray | None, quaternions: FloatArray | None,
                  gyro: FloatArray | None) -> None:
     """CalibrationError naming what moved. The measurement is cut in five windows and
     their means compared, so sensor noise (which averages out) is not taken for motion."""
     if positions is not None and len(positions) >= 10:
-        means = np.array([w.mean(axis=0) for w in _windows(positions)])
-        spread = float(np.max(np.linalg.norm(means - means[0], axis=1)))
-        if spread > MOVING_POSITION_M:
+        change, limit = _change_and_limit(_windows(positions), MOVING_POSITION_M)
+        if change > limit:
             raise CalibrationError(f"the vehicle moved during the measurement: its Vicon "
-                                   f"position drifted {1e3 * spread:.1f} mm (at rest < "
-                                   f"{1e3 * MOVING_POSITION_M:.0f} mm); keep it still and retry")
+                                   f"position drifted {1e3 * change:.1f} mm (at rest < "
+                                   f"{1e3 * limit:.0f} mm); keep it still and retry")
     if quaternions is not None and len(quaternions) >= 10:
-        aligned = _aligned_quaternions(quaternions)
-        rotations = [_mean_rotation(w) for w in _windows(aligned)]
-        worst = max(float(np.degrees((r * rotations[0].inv()).magnitude())) for r in rotations)
-        if worst > MOVING_ATTITUDE_DEG:
+        change, limit = _change_and_limit(_windows(_rotation_vectors(quaternions)),
+                                          math.radians(MOVING_ATTITUDE_DEG))
+        if change > limit:
             raise CalibrationError(f"the vehicle moved during the measurement: its attitude "
-                                   f"changed by {worst:.1f} deg (at rest < "
-                                   f"{MOVING_ATTITUDE_DEG:g} deg); keep it still and retry")
+                                   f"changed by {math.degrees(change):.1f} deg (at rest < "
+                                   f"{math.degrees(limit):.1f} deg); keep it still and retry")
     if gyro is not None and len(gyro) >= 10:
-        means = np.array([w.mean(axis=0) for w in _windows(gyro)])
-        worst = float(np.max(np.abs(means - np.asarray(gyro).mean(axis=0))))
-        if worst > MOVING_GYRO_RAD_S:
+        change, limit = _change_and_limit(_windows(gyro), MOVING_GYRO_RAD_S)
+        if change > limit:
             raise CalibrationError(f"the vehicle moved during the measurement: the gyro's "
-                                   f"mean changed by {worst:.2f} rad/s (at rest < "
-                                   f"{MOVING_GYRO_RAD_S:g} rad/s); keep it still and retry")
+                                   f"mean changed by {change:.2f} rad/s (at rest < "
+                                   f"{limit:.2f} rad/s); keep it still and retry")
 
 
 def calibrate_imu(config: GroundStationConfig, seconds: float = 10.0,

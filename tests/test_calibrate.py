@@ -163,3 +163,51 @@ def test_no_vehicle_is_a_clear_error(tmp_path: Path) -> None:
     out = gs("calibrate", "imu", "--config", str(ROOT / "config" / "sim.yaml"),
              "--serial-port", str(tmp_path / "no-such-port"), "--seconds", "1")
     assert out.returncode == 1 and "no-such-port" in out.stderr and "Traceback" not in out.stderr
+
+
+def _vicon_at_rest(rng: np.random.Generator, n: int, turn_deg: float = 0.0) -> np.ndarray:
+    """(n, 4) scalar-first quaternions as the virtual Vicon makes them at 16 times Table
+    6.1's variance (independent noise on q0..q3 of the level vehicle, normalised), turning
+    about z by ``turn_deg`` in all, then seen through a body_to_object 180 deg off about x
+    (the wrong frame of the test above, where the attitude sits near 180 deg of roll)."""
+    from scipy.spatial.transform import Rotation
+
+    q = np.array([1.0, 0.0, 0.0, 0.0]) + np.sqrt(VICON_Q_VAR) * rng.standard_normal((n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    turn = Rotation.from_euler("z", np.linspace(0.0, turn_deg, n)[:, None], degrees=True)
+    seen = turn * Rotation.from_quat(np.roll(q, -1, axis=1)) * Rotation.from_euler(
+        "x", 180.0, degrees=True)
+    return np.roll(seen.as_quat(), 1, axis=1)
+
+
+def test_the_stillness_check_tells_noise_from_motion() -> None:
+    """2 s at 80 Hz of a noisy Vicon at rest: the window means scatter by 0.15 to 0.25 deg
+    per axis, so a fixed 1 deg limit refused about one such measurement in 25 (counted here
+    with the fixed limit, computed independently); the limit that grows with the measured
+    noise (false-alarm rate 1e-6) refuses none of 400, yet refuses a 6 deg turn, a 10 mm
+    drift and a turning gyro under the same noise."""
+    from scipy.spatial.transform import Rotation
+
+    from groundstation.calibration import CalibrationError, _check_still
+
+    rng = np.random.default_rng(20240611)  # a fixed seed: the draw is not the point
+    fixed_limit_refusals = 0
+    for _ in range(400):
+        q = _vicon_at_rest(rng, 160)
+        _check_still(None, q, None)  # never raises at rest
+        windows = [Rotation.from_quat(np.roll(w, -1, axis=1)).mean()
+                   for w in np.array_split(q * np.sign(q @ q[0])[:, None], 5)]
+        worst = max(np.degrees((w * windows[0].inv()).magnitude()) for w in windows)
+        fixed_limit_refusals += bool(worst > 1.0)
+    assert 4 <= fixed_limit_refusals <= 40  # about 4 % of 400: the defect this replaces
+    with pytest.raises(CalibrationError, match="attitude changed by"):
+        _check_still(None, _vicon_at_rest(rng, 160, turn_deg=6.0), None)
+    drift = np.linspace(0.0, 0.01, 160)[:, None] * np.array([1.0, 0.0, 0.0])
+    noise = np.sqrt(VICON_POS_VAR) * rng.standard_normal((160, 3))
+    _check_still(noise, None, None)
+    with pytest.raises(CalibrationError, match="position drifted"):
+        _check_still(noise + drift, None, None)
+    gyro_noise = np.sqrt(GYRO_VAR) * rng.standard_normal((200, 3))
+    _check_still(None, None, gyro_noise)
+    with pytest.raises(CalibrationError, match="gyro's mean changed"):
+        _check_still(None, None, gyro_noise + np.linspace(0.0, 0.3, 200)[:, None])
