@@ -13,9 +13,10 @@ The quantities are the point-mass inversion of the check, per unit mass (NED, e3
     f = a - g e3 - (I_i / m) v3 e3          required specific thrust [m/s^2]
     lift = m |f|,  tilt = angle(-f, -e3),  tilt rate = |f'_perp| / |f|,  f' ~ j
 
-The margins leave room for what the check measures differently (its tilt rate is the
-change of direction over 0.1 s, this one the instant's) and for rounding at the limits;
-they are far below the faults they exist for.
+The margins leave room for rounding at the limits and for what the check may measure
+differently (a trajectory that does not describe itself in pieces is checked on samples,
+its tilt rate as the change of direction over 0.1 s); they are far below the faults they
+exist for (the fly-away's reference asked 82 deg of tilt and 84,500 m/s^3).
 """
 
 from __future__ import annotations
@@ -31,8 +32,8 @@ TILT_MARGIN = 1.5
 LIFT_MARGIN = 1.25
 """Largest lift allowed in flight / the rotors' most (and the least allowed x 1/2)."""
 RATE_MARGIN = 3.0
-"""Tilt rate allowed in flight / the body-rate limit: the instant's rate of a min-jerk
-corner peaks above the check's 0.1 s average."""
+"""Tilt rate allowed in flight / the body-rate limit: a sampled check's 0.1 s average of a
+min-jerk corner's tilt rate lies below the instant's peak."""
 
 
 @dataclass(frozen=True, slots=True)
