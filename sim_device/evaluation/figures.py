@@ -35,6 +35,7 @@ from groundstation.evaluation.plotting import (
 )
 from groundstation.evaluation.record import FlightRecord
 from groundstation.loop.supervisor import AIRBORNE, State
+from sim_device.evaluation.figures_inputs import input_figures
 from sim_device.evaluation.figures_issue13 import issue13_figures
 from sim_device.evaluation.scenarios import STEP_TIME_S
 
@@ -347,7 +348,7 @@ def all_figures(records: Records, models: Mapping[str, SimResult], out: Path,
         lambda: square(records, out, period_s), lambda: yz_rectangle(records, out, period_s),
         lambda: low_hover(records, out), lambda: outage(records, out),
         lambda: thrust_error(records, out), lambda: hinf(records, out),
-        lambda: issue13_figures(records, out),
+        lambda: issue13_figures(records, out), lambda: input_figures(records, out),
     ]
     paths: list[Path] = []
     for make in makers:

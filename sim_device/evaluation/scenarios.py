@@ -38,7 +38,8 @@ scored over the whole of tracking (``settle_s`` 0: the file starts at rest where
 take-off ends): the figure-eight 1.2 m x 0.6 m as a dense waypoint CSV written by numpy
 every 20 ms (``data/eight_8s_50hz.csv``, ``data/eight_4s_50hz.csv``: 8 s and 4 s a
 lap; fitted with a spline and eased in and out) and the Crazyflie examples' figure8.csv
-(polynomial segments, ``data/figure8.csv``).
+(polynomial segments, ``data/figure8.csv``); and a hover on a Vicon sender that reports
+exact angles and a noisy position, as a simulator's does (``sim.vicon.angle_noise``).
 """
 
 from __future__ import annotations
@@ -211,6 +212,11 @@ def _files() -> list[Scenario]:
                         "once", "polynomial file", "waypoints", "lqr-ff", lap,
                         overrides={**SHAPED, "trajectory.file": str(figure8)},
                         settle_s=0.0))
+    out.append(Scenario("hover-exact-angles", "trajectory-files",
+                        "Hover on a Vicon sender with exact angles (a simulator's: rotation "
+                        "exactly 0 when level at heading 0, noisy position)", "Vicon stream",
+                        "hover", "lqr-ff", 20.0,
+                        overrides={**SHAPED, "sim.vicon.angle_noise": False}))
     return out
 
 

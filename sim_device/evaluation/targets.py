@@ -52,6 +52,7 @@ TARGETS: dict[str, tuple[Target, ...]] = {
     "file-eight-8s": (Target("rms_m", 0.010, "dense CSV eight, 8 s a lap: <= 1 cm RMS"),),
     "file-eight-4s": (Target("rms_m", 0.025, "dense CSV eight, 4 s a lap: <= 2.5 cm RMS"),),
     "file-figure8": (Target("rms_m", 0.025, "Crazyflie figure8.csv: <= 2.5 cm RMS"),),
+    "hover-exact-angles": (Target("rms_m", 0.005, "hover on exact-angle Vicon: <= 0.5 cm RMS"),),
 }
 """Issue 13's targets by scenario name."""
 
