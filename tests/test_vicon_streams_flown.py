@@ -22,19 +22,26 @@ def hover_rms(result: FlightResult) -> float:
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
 
 
-@pytest.mark.parametrize("rate_hz", [10.0, 100.0])
-def test_a_sender_with_exact_angles_flies(rate_hz: float) -> None:
+SLOW_VICON = {"vicon.min_rate_hz": 0.5, "vicon.expected_rate_hz": 2.0,
+              "safety.vicon_loss_hold_s": 1.5, "safety.vicon_loss_land_s": 3.0}
+"""What a lab flying on a 1 Hz stream configures (as the thesis's Ch. 11.1 did): the rate
+check at half the rate, HOLD only after 1.5 missed poses."""
+
+
+@pytest.mark.parametrize(("rate_hz", "limit_m"), [(1.0, 0.03), (10.0, 0.005), (100.0, 0.005)])
+def test_a_sender_with_exact_angles_flies(rate_hz: float, limit_m: float) -> None:
     """A level vehicle at heading 0 is reported with rotation exactly (0, 0, 0) while its
     position carries Table 6.1 noise: before, every such flight ended in ABORTED."""
     cfg = sim_config(**{"trajectory.name": "hover", "sim.vicon.rate_hz": rate_hz,
-                        "sim.vicon.angle_noise": False})
+                        "sim.vicon.angle_noise": False,
+                        **(SLOW_VICON if rate_hz < 8.0 else {})})
     flight = InProcessFlight(cfg, duration_s=10.0)
     result = flight.run(max_time_s=60.0)
     assert [tr.new for tr in result.transitions] == [
         State.TAKEOFF, State.TRACK, State.LAND, State.DISARM, State.DONE]
     health = flight.pose_filter.health(result.lab.t)
     assert health.lost_held_identity == 0 and health.poses > 0.9 * rate_hz * 20
-    assert hover_rms(result) < 0.005, hover_rms(result)
+    assert hover_rms(result) < limit_m, hover_rms(result)
 
 
 def test_a_stream_that_starts_while_the_object_is_occluded_flies_once_it_is_seen() -> None:
