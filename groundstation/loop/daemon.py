@@ -80,6 +80,7 @@ from groundstation.logs import log_through_sink
 from groundstation.loop.api import LoopInbox, MotionApi
 from groundstation.loop.core import FlightCore, TickResult
 from groundstation.loop.inputs import DataFrontEnd, VehicleStatus, with_vicon
+from groundstation.loop.logdir import create_flight_log
 from groundstation.loop.planner import settings_from_config
 from groundstation.loop.planner_process import PlannerProcess
 from groundstation.loop.realtime import (
@@ -275,8 +276,9 @@ class FlightDaemon:
             stack.callback(link.close)  # sends the final COMMAND with ctrl mask 0
             vicon = ViconClient.from_config(cfg.vicon, cfg.safety).start()
             stack.callback(vicon.close)
-            recorder = FlightRecorder.create(cfg.logging.flight_log_dir, dump_config(cfg),
-                                             {"supervisor_states": [s.name for s in State]})
+            # the configured directory, else a user's (one line says so): logdir.py
+            recorder = create_flight_log(cfg.logging.flight_log_dir, dump_config(cfg),
+                                         {"supervisor_states": [s.name for s in State]})
             stack.callback(recorder.close)
             self.log_dir = str(recorder.directory)
             telemetry = TelemetryPublisher.from_config(cfg.telemetry)
