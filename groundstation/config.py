@@ -946,8 +946,10 @@ Speed = Annotated[float, within(0.0, 20.0, "m/s: 20 m/s crosses Table B.1's 3 m 
 
 TrajectoryName = Literal[
     "hover", "step-x", "step-y", "step-z", "square", "yz-rectangle", "low-hover",
-    "figure-eight", "yaw-turn", "waypoints", "none",
+    "figure-eight", "yaw-turn", "waypoints", "sysid", "none",
 ]
+# sysid: the identification flight (doublets on each rate stick, climbs and descents;
+# groundstation/control/excitation.py), at center, heading yaw_deg (null: north)
 
 
 class TrajectoryConfig(ConfigModel):

@@ -20,6 +20,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from groundstation.control.excitation import identification_flight
+from groundstation.control.feasibility import FlightLimits, Volume
 from groundstation.control.polyfile import is_polynomial_file, load_polynomial_file
 from groundstation.control.trajectory import (
     FigureEight,
@@ -36,7 +38,7 @@ if TYPE_CHECKING:
 
 TRAJECTORY_NAMES = (
     "hover", "step-x", "step-y", "step-z", "square", "yz-rectangle", "low-hover",
-    "figure-eight", "yaw-turn", "waypoints",
+    "figure-eight", "yaw-turn", "waypoints", "sysid",
 )
 
 
@@ -193,6 +195,9 @@ def make_trajectory(
     yaw: float | None = None,
     yaw_turn: float = 2.0 * math.pi,
     relative: bool = True,
+    limits: FlightLimits | None = None,
+    volume: Volume | None = None,
+    rate_tau_s: float = 0.064,
 ) -> Trajectory:
     """Build a named trajectory (the names of ``TrajectoryConfig.name``).
 
@@ -206,8 +211,11 @@ def make_trajectory(
     ``period_s``. waypoints: the CSV ``file``, a waypoint list (see
     :func:`load_waypoints`) or a polynomial file recognised by its header
     (:mod:`~groundstation.control.polyfile`; ``relative``: its start placed at
-    ``center``). ``yaw`` [rad]: the heading (the start heading of yaw-turn); None keeps
-    the heading at take-off (free heading).
+    ``center``). sysid: the identification flight at ``center``
+    (:func:`~groundstation.control.excitation.identification_flight`), its amplitudes from
+    ``limits``, ``volume`` and the rate loop's ``rate_tau_s`` [s] (defaults: the model's
+    and Table B.1's), at heading ``yaw`` (None: north). ``yaw`` [rad]: the heading (the
+    start heading of yaw-turn); None keeps the heading at take-off (free heading).
     """
     c = np.asarray(center, dtype=float)
     steps = {"step-x": (step_m, 0.0, 0.0), "step-y": (0.0, step_m, 0.0),
@@ -228,6 +236,12 @@ def make_trajectory(
         return FigureEight(c, width_m=size_m, period_s=period_s, yaw=yaw)
     if name == "yaw-turn":
         return YawTurn(c, turn=yaw_turn, period_s=period_s, yaw=yaw)
+    if name == "sysid":
+        return identification_flight(
+            c, 0.0 if yaw is None else yaw, limits if limits is not None else FlightLimits(),
+            volume if volume is not None else Volume((-1.5, 1.5), (-1.5, 1.5), (-2.0, 0.05),
+                                                     margin_m=0.1, name="safety.volume"),
+            rate_tau_s)
     if name == "waypoints":
         if file is None:
             raise TrajectoryError("trajectory 'waypoints' needs a file")

@@ -7,6 +7,11 @@
   against the body rates and specific force that Vicon's poses in the same log imply
   (:mod:`.scales`).
 
+The flight that feeds them is the identification flight, ``gs fly --trajectory sysid``
+(:mod:`groundstation.control.excitation`: doublets on each rate stick within the
+configured limits, climbs and descents); a refusal for want of excitation recommends
+it (:data:`~groundstation.identification.rates.SYSID_HINT`), and its log passes them all.
+
 Both read a flight directory written by :class:`groundstation.loop.recorder.FlightRecorder`
 and its configuration, return frozen records with ``config_fields()`` (values keyed by
 the configuration's field paths), ``summary()`` and ``figure(path)``, and raise

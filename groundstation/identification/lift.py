@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from groundstation.errors import IdentificationError
-from groundstation.identification.rates import FlightLog, load_flight_log
+from groundstation.identification.rates import SYSID_HINT, FlightLog, load_flight_log
 from groundstation.types import FloatArray
 
 STEADY_V3 = 0.1
@@ -163,8 +163,8 @@ def identify_thrust_log(log_dir: str | Path) -> ThrustLogFit:
     steady = (np.abs(v3) < STEADY_V3) & (np.abs(v3_dot) < STEADY_ACC)
     if int(steady.sum()) < MIN_SAMPLES:
         raise IdentificationError(f"{log_dir}: only {int(steady.sum())} steady samples off the "
-                                  f"floor (|v3| < {STEADY_V3} m/s; {MIN_SAMPLES} needed): fly a "
-                                  "hover or a slow trajectory")
+                                  f"floor (|v3| < {STEADY_V3} m/s; {MIN_SAMPLES} needed): "
+                                  f"{SYSID_HINT}")
     u_s = u[steady]
     lift = force_meas[steady] - cfg.induced_inflow * v3[steady]
     nominal: FloatArray = np.asarray(np.polyval(configured, u_s), dtype=float)  # eq. 3.7
@@ -193,8 +193,8 @@ def identify_inflow_log(log_dir: str | Path,
     moving = (np.abs(v3) > MOVING_V3) & (np.abs(v3_dot) < STEADY_ACC)  # steady climbs
     if int(moving.sum()) < MIN_SAMPLES // 2:
         raise IdentificationError(f"{log_dir}: only {int(moving.sum())} samples with "
-                                  f"|v3| > {MOVING_V3} m/s ({MIN_SAMPLES // 2} needed): fly "
-                                  "vertical steps (trajectory step-z) for App. C.2's climbs")
+                                  f"|v3| > {MOVING_V3} m/s ({MIN_SAMPLES // 2} needed) for App. "
+                                  f"C.2's steady climbs: {SYSID_HINT}")
     residual = force_meas[moving] - s * np.polyval(list(cfg.thrust_poly), u[moving])
     inflow, ci = _slope_ci(v3[moving], residual)
     return InflowLogFit(inflow=inflow, inflow_ci=ci, samples=int(moving.sum()), v3=v3[moving],

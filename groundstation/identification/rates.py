@@ -92,6 +92,11 @@ _STICK_COLUMN = {"roll": "cmd_roll", "pitch": "cmd_pitch", "yaw": "cmd_yaw"}
 _MASK_BIT = {"pitch": 0, "roll": 1, "yaw": 2}  # the spec's ctrl mask (bit0 pitch ... bit3 thrust)
 _BODY_INDEX = {"roll": 0, "pitch": 1, "yaw": 2}
 _Z95 = 1.959963984540054  # two-sided 95 % normal quantile
+SYSID_HINT = ("fly the identification flight, gs fly --trajectory sysid (doublets on every "
+              "rate stick, climbs and descents: its log passes every gs identify)")
+"""What a refusal for want of excitation recommends: the one flight that is known to
+excite every axis (square and figure-eight flown by lqr-ff move the sticks by a few tens
+of RC units; tests/test_identification_flight.py identifies from the sysid log)."""
 
 
 # --------------------------------------------------------------------------- the log
@@ -602,15 +607,14 @@ def _identify_axis(log: FlightLog, axis: Axis, gyro: FloatArray, wire: float,
         raise IdentificationError(
             f"{where}: only {n} usable IMU samples (at least {min_samples} needed): the "
             f"vehicle must be airborne with the {axis} channel commanded by the ground "
-            f"station (cmd_mask bit {_MASK_BIT[axis]}) for longer")
+            f"station (cmd_mask bit {_MASK_BIT[axis]}) for longer: {SYSID_HINT}")
     u_now = _stick_in_force(p, 0.0)
     stick_std = float(np.std(u_now))
     if stick_std < min_stick_std:
         raise IdentificationError(
             f"{where}: too little excitation: the {axis} stick varies by "
             f"{stick_std:.1f} RC units (standard deviation; at least {min_stick_std:g} "
-            f"needed): fly a trajectory that moves the vehicle on this axis "
-            f"(e.g. trajectory 'square' or 'figure-eight'; 'yaw-turn' for yaw)")
+            f"needed): {SYSID_HINT}")
     d, tau, theta, cov, pred = _fit_axis(p, max_delay_s, tau_bounds)
     k_rate, bias = float(theta[0]), float(theta[1])
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -619,7 +623,7 @@ def _identify_axis(log: FlightLog, axis: Axis, gyro: FloatArray, wire: float,
         raise IdentificationError(
             f"{where}: too little excitation to determine the gain: K = {k_rate:.3e} "
             f"rad/s/unit with a 95 % interval [{k_ci[0]:.3e}, {k_ci[1]:.3e}], wider than "
-            f"+-{100 * max_k_rel_ci:g} %: fly a longer or livelier trajectory")
+            f"+-{100 * max_k_rel_ci:g} %: {SYSID_HINT}")
     resid = p.y - pred
     rss = float(resid @ resid)
     tss = float(np.sum((p.y - np.mean(p.y)) ** 2))

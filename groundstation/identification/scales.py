@@ -45,7 +45,7 @@ from typing import Literal
 import numpy as np
 
 from groundstation.errors import IdentificationError
-from groundstation.identification.rates import BoolArray, FlightLog, load_flight_log
+from groundstation.identification.rates import SYSID_HINT, BoolArray, FlightLog, load_flight_log
 from groundstation.types import FloatArray
 
 __all__ = [
@@ -484,13 +484,13 @@ def _fit_axis(where: str, axis: ScaleAxis, x: FloatArray, y: FloatArray, zero: f
     if n < min_samples:
         raise IdentificationError(
             f"{where}: {axis}: only {n} points with Vicon and IMU while airborne (at least "
-            f"{min_samples} needed): fly longer with Vicon tracking")
+            f"{min_samples} needed): fly longer with Vicon tracking: {SYSID_HINT}")
     ref_std = float(np.std(y))
     if ref_std < min_std:
         hint = (" (a quadrotor's rotors push only along body z: the accelerometer's x and y "
                 "are not excited in flight; calibrate them on the bench and leave them out "
                 "with axes=...)" if axis in ("acc_x", "acc_y") else
-                ": fly a trajectory that moves the vehicle on this axis")
+                f": {SYSID_HINT}")
         raise IdentificationError(
             f"{where}: {axis}: too little excitation: the Vicon reference varies by "
             f"{ref_std:.3f} {unit} (standard deviation; at least {min_std:g} needed){hint}")

@@ -29,6 +29,7 @@ import yaml
 
 from groundstation.config import validate_config
 from groundstation.errors import IdentificationError
+from groundstation.identification.rates import SYSID_HINT
 from groundstation.loop.inputs import quadrotor_params
 from groundstation.loop.recorder import read_flight
 from groundstation.loop.supervisor import AIRBORNE
@@ -159,8 +160,7 @@ def verify_model(log_dir: str | Path) -> ModelVerification:
     air = np.isin(rows["state"], [int(s) for s in AIRBORNE]) & (z < floor - MIN_HEIGHT_M)
     if int(air.sum()) < MIN_SAMPLES:
         raise VerificationError(f"{log_dir}: only {int(air.sum())} airborne samples (at least "
-                                f"{MIN_SAMPLES} needed): fly a trajectory, not just a hover "
-                                "on the floor")
+                                f"{MIN_SAMPLES} needed): {SYSID_HINT}")
     t = rows["imu_t"]
     q = rows["est_quaternion"]
     v = rows["est_velocity_body"]

@@ -139,7 +139,12 @@ def prepare_trajectory(config: GroundStationConfig, trajectory: Trajectory | Non
     """:func:`trajectory_for_flight` without raising on broken limits: the shaped
     trajectory, its duration, its feasibility report and what it was taken to be.
     TrajectoryError only if it cannot be built (a file that cannot be read)."""
-    traj = trajectory if trajectory is not None else trajectory_from_config(config.trajectory)
+    # the identification flight sizes its doublets from the limits and the volume
+    sysid = {"limits": flight_limits_from_config(config), "volume": volume_from_config(config),
+             "rate_tau_s": config.vehicle.rate_loop_tau_s} \
+        if config.trajectory.name == "sysid" else {}
+    traj = trajectory if trajectory is not None else trajectory_from_config(config.trajectory,
+                                                                            **sysid)
     if duration_s is None:
         lap = traj.periodic and traj.duration > 0.0
         if lap or isinstance(traj, PiecewiseLinear | PiecewisePolynomial):  # a file: once
