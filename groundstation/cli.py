@@ -16,7 +16,7 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Annotated, Any, NoReturn
+from typing import Annotated, Any, Literal, NoReturn
 
 import typer
 
@@ -643,6 +643,47 @@ def calibrate_vicon_command(
         raise _fail(str(exc), 1) from exc
     _report_fit(result, "calibrate-vicon", out, as_json,
                 {"samples": result.samples, "seconds": result.seconds})
+
+
+@app.command("link-check")
+def link_check_command(
+    config: ConfigOption,
+    seconds: Annotated[float, typer.Option(min=1.0, help="How long to listen [s].")] = 10.0,
+    serial_port: SerialPortOption = None, protocol: ProtocolOption = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the report as one JSON "
+                                          "object.")] = False,
+    expect_switch: Annotated[Literal["on", "off"], typer.Option(
+        help="The serial-enable switch position a healthy link shows: on (to fly) or off "
+             "(the hand-back test, a pilot flying by hand).")] = "on",
+) -> None:
+    """Listen to the vehicle's serial link with the propellers off and say whether it is
+    fit to fly. Sends nothing that moves the vehicle (X-3D: CONFIG to start its DATA
+    stream; AscTec LL: polls; never a command). Reports the DATA rate against
+    serial.data_period_ms, rejected frames by reason, the blocks present, the
+    serial-enable switch, the channels the vehicle applies, the battery, the pilot's
+    sticks and whether the IMU reads rest.
+
+    Exit codes: 0 healthy; 1 not healthy (the reasons on the verdict line); 2 usage or
+    configuration error; 3 the port could not be opened (absent, no permission, or in
+    use by a flight).
+    """
+    import json
+
+    from groundstation.errors import LinkError
+    from groundstation.linkcheck import run_link_check
+
+    cfg = load(config, {"serial.port": serial_port, "serial.protocol": protocol})
+    try:
+        report = run_link_check(cfg, seconds, expect_switch=expect_switch == "on")
+    except LinkError as exc:
+        raise _fail(str(exc), 3) from exc
+    if as_json:
+        typer.echo(json.dumps(report.to_json()))
+    else:
+        for line in report.lines():
+            typer.echo(line)
+    if not report.healthy:
+        raise typer.Exit(1)
 
 
 @app.command("verify-model")
