@@ -468,6 +468,35 @@ def identify_thrust(
     typer.echo(fit.report())
 
 
+@identify_app.command("hover-stick")
+def identify_hover_stick(
+    stick: Annotated[float, typer.Argument(
+        help="The thrust stick the vehicle hovers at, flown by hand [RC units, 1..4095]: "
+             "gs link-check --expect-switch off shows the pilot's sticks.")],
+    config: ConfigOption,
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON object keyed by the "
+                                          "configuration's field names.")] = False,
+    out_dir: Annotated[Path, typer.Option(
+        "--out-dir", help="Directory for the figure.")] = Path("."),
+) -> None:
+    """A first thrust map before any flight log: the configured thrust polynomial (eq. 3.7)
+    scaled so that it lifts the vehicle's weight (vehicle.mass_kg, vehicle.gravity) at the
+    stick the pilot hovers at. A thrust-automatic flight needs a map to take off with;
+    its log then refines it (gs identify thrust LOG). Exit 2 for a stick where the
+    configured map gives no lift.
+    """
+    from groundstation.identification.lift import thrust_from_hover_stick
+
+    vehicle = load(config).vehicle
+    try:
+        result = thrust_from_hover_stick(stick, mass_kg=vehicle.mass_kg,
+                                         gravity=vehicle.gravity,
+                                         thrust_poly=vehicle.thrust_poly)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 2) from exc
+    _report_fit(result, "identify-hover-stick", out_dir, as_json, {"stick": stick})
+
+
 @identify_app.command("inflow")
 def identify_inflow(
     source: Annotated[Path, typer.Argument(

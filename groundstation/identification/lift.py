@@ -16,10 +16,17 @@ took it from us, else the pilot's):
 * **inflow** (:func:`identify_inflow_log`): samples in vertical motion (``|v3|`` above
   :data:`MOVING_V3`, the App. C.2 climbs and descents of a ``step-z`` trajectory):
   ``I_i`` is the slope of ``m f_z - s F_cfg(u)`` against ``v3``.
+
+Before any log (a thrust-automatic flight needs a thrust map to take off with, and the
+map is fitted from such a flight's log) :func:`thrust_from_hover_stick` scales the
+configured polynomial so that it lifts the weight at the thrust stick the pilot hovers
+at by hand (``gs identify hover-stick STICK``; ``gs link-check --expect-switch off``
+reports the pilot's sticks while the pilot hovers).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -199,3 +206,83 @@ def identify_inflow_log(log_dir: str | Path,
     inflow, ci = _slope_ci(v3[moving], residual)
     return InflowLogFit(inflow=inflow, inflow_ci=ci, samples=int(moving.sum()), v3=v3[moving],
                         residual_force=residual)
+
+
+@dataclass(frozen=True)
+class HoverStickFit:
+    """A first thrust map from the thrust stick the vehicle hovers at (no flight log yet).
+
+    stick : the hover thrust stick [RC units]; scale : lift = scale x the configured
+    polynomial, so that it lifts the weight at ``stick``; coeffs : the scaled eq. 3.7
+    coefficients (a3, a2, a1, a0) [N]; configured : the configured ones; weight_n : m g [N];
+    configured_lift_n : what the configured map lifts at ``stick`` [N] (positive up)
+    """
+
+    stick: float
+    scale: float
+    coeffs: tuple[float, float, float, float]
+    configured: tuple[float, float, float, float]
+    weight_n: float
+    configured_lift_n: float
+
+    def config_fields(self) -> dict[str, Any]:
+        """``{"vehicle.thrust_poly": [a3, a2, a1, a0]}``: the configured map scaled."""
+        return {"vehicle.thrust_poly": list(self.coeffs)}
+
+    def summary(self) -> str:
+        """Human-readable lines with units."""
+        return "\n".join([
+            f"hover at thrust stick {self.stick:.0f}: the configured eq. 3.7 polynomial lifts "
+            f"{self.configured_lift_n:.3f} N there, the vehicle weighs {self.weight_n:.3f} N: "
+            f"lift = {self.scale:.4f} x the configured map",
+            "  thrust_poly (a3, a2, a1, a0) = " + ", ".join(f"{c:.4g}" for c in self.coeffs),
+            "  (one reading, no interval: the log of the first thrust-automatic flight gives "
+            "one, gs identify thrust LOG)"])
+
+    def figure(self, path: str | Path) -> Path:
+        """The configured and the scaled maps against the stick, the hover point marked."""
+        from groundstation.evaluation.plotting import pyplot, save
+
+        plt = pyplot()
+        fig, ax = plt.subplots(figsize=(8, 5))
+        grid = np.linspace(0.0, 4096.0, 200)
+        ax.plot(grid, -np.polyval(self.configured, grid), "k--", lw=1,
+                label="configured eq. 3.7")
+        ax.plot(grid, -np.polyval(self.coeffs, grid), "C3", lw=1.5,
+                label=f"scaled x {self.scale:.3f}")
+        ax.plot([self.stick], [self.weight_n], "o", color="C0", label="hover: lift = m g")
+        ax.set(xlabel="thrust stick [RC units]", ylabel="lift, up [N]",
+               title="gs identify hover-stick: the map through the hover point")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8, loc="upper left")
+        return save(fig, Path(path))
+
+
+def thrust_from_hover_stick(stick: float, *, mass_kg: float, gravity: float,
+                            thrust_poly: tuple[float, float, float, float] | list[float]
+                            ) -> HoverStickFit:
+    """The configured thrust polynomial (eq. 3.7, body-z force [N], negative up) scaled so
+    that it lifts the weight ``mass_kg * gravity`` at the hover thrust ``stick`` [RC units]:
+    the first map a thrust-automatic flight can take off with, before any flight log.
+
+    IdentificationError if the stick is outside 1..4095 or the configured map gives no
+    lift there.
+    """
+    if not (math.isfinite(stick) and 1.0 <= stick <= 4095.0):
+        raise IdentificationError(f"hover stick {stick:g}: a thrust stick is 1..4095 RC units "
+                                  "(0 stops the motors)")
+    poly = tuple(float(c) for c in thrust_poly)
+    if len(poly) != 4:
+        raise IdentificationError("thrust_poly must have 4 coefficients (a3, a2, a1, a0)")
+    lift = -float(np.polyval(poly, stick))
+    if not lift > 0.0:
+        raise IdentificationError(f"the configured thrust_poly gives no lift at stick "
+                                  f"{stick:.0f} ({-lift:.3f} N along body z): it cannot be "
+                                  "scaled to hover there")
+    weight = mass_kg * gravity
+    scale = weight / lift
+    coeffs = tuple(scale * c for c in poly)
+    return HoverStickFit(stick=float(stick), scale=scale,
+                         coeffs=(coeffs[0], coeffs[1], coeffs[2], coeffs[3]),
+                         configured=(poly[0], poly[1], poly[2], poly[3]), weight_n=weight,
+                         configured_lift_n=lift)
