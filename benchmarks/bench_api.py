@@ -86,9 +86,9 @@ def main() -> None:
             gs.takeoff(1.0, timeout=60.0)
             for k in range(args.moves):
                 target = POINTS[k % len(POINTS)]
-                yaw = math.radians((k * 70) % 360 - 180)
+                yaw = (k * 70) % 360 - 180  # degrees from north
                 sent = time.monotonic()
-                motion = gs.go_to(target, yaw)
+                motion = gs.go_to(target, yaw_deg=yaw)
                 round_trips.append(time.monotonic() - sent)
                 done = gs.wait_until_arrived(motion, timeout=30.0).motion
                 assert done is not None and done.arrived_at is not None

@@ -9,8 +9,9 @@ the four corners of a 0.75 m square centred on (0, 0) at 1 m height, prints how 
 each arrival was and how fast the vehicle reacted, and lands. Exit code 0 only if the
 flight ended normally (COMPLETED: landed and handed back, no failsafe), else 1.
 
-Frames: NED metres, so 1 m above the floor is z = -1. The ground station plans and checks
-every motion (volume, speed, tilt); one it cannot fly is refused with a reason.
+Frames: NED metres, so 1 m above the floor is z = -1; headings in degrees from north
+(``go_to(corner, yaw_deg=90)`` would face east). The ground station plans and checks every
+motion (volume, speed, tilt); one it cannot fly is refused with a reason.
 """
 
 from __future__ import annotations
@@ -36,15 +37,16 @@ HEIGHT_M = 1.0  # above the floor [m]
 
 def main() -> int:
     parser = argparse.ArgumentParser(description="Fly a square through the run-time API.")
-    parser.add_argument("--endpoint", default=DEFAULT_CONTROL,
-                        help="the daemon's telemetry.control_endpoint")
+    parser.add_argument("--control", "--endpoint", default=DEFAULT_CONTROL,
+                        help="the daemon's telemetry.control_endpoint (--endpoint: the former "
+                             "name, as in gs)")
     parser.add_argument("--telemetry", default=DEFAULT_TELEMETRY,
                         help="the daemon's telemetry.endpoint (to see the flight end)")
     parser.add_argument("--server-key", help="the daemon's public key (CURVE)")
     parser.add_argument("--client-key", help="this client's .key_secret file (CURVE)")
     args = parser.parse_args()
 
-    gs = Client(args.endpoint, telemetry=args.telemetry, timeout_s=5.0,
+    gs = Client(args.control, telemetry=args.telemetry, timeout_s=5.0,
                 server_key=args.server_key, client_key=args.client_key)
     h = SIDE_M / 2
     corners = [(h, h, -HEIGHT_M), (h, -h, -HEIGHT_M), (-h, -h, -HEIGHT_M), (-h, h, -HEIGHT_M)]

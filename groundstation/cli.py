@@ -8,6 +8,10 @@ missing optional package); 2 bad configuration, usage, or a file that cannot be
 used; `gs fly` adds 3 (could not start), 4 (stopped on request) and 5 (flight log
 incomplete), see its help;
 130 Ctrl-C; 141 the reader of the output went away (``gs export LOG | head``).
+
+Option names mean one thing across the commands (:mod:`groundstation.cli_options`), and
+help is plain text (no rich markup: it would eat ``[hinf]`` and ``[m]``); help texts use
+single backquotes, never reST's double ones.
 """
 
 from __future__ import annotations
@@ -16,49 +20,69 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Annotated, Any, Literal, NoReturn
+from typing import Annotated, Any, Literal, NoReturn, get_args
 
 import typer
 
 from groundstation import __version__
 from groundstation.cli_api import register as register_api_commands
+from groundstation.cli_options import (
+    REPLY_TIMEOUT_S,
+    TRAJECTORY_CHOICES,
+    TRAJECTORY_HELP,
+    Controller,
+    DurationAlias,
+    EndpointAlias,
+    ExportFormat,
+    JsonOption,
+    MotorAction,
+    OutAlias,
+    ScaleAxis,
+    aliased,
+    fail,
+)
+from groundstation.cli_options import ConfigOption as ConfigOption
+from groundstation.cli_options import ProtocolOption as ProtocolOption
+from groundstation.client import DEFAULT_CONTROL, DEFAULT_TELEMETRY
+from groundstation.config import Channel as ChannelName
 from groundstation.config import (
     GroundStationConfig,
     VehicleConfig,
     apply_overrides,
     check_files,
     dump_config,
+    key_lines,
     load_config,
 )
-from groundstation.errors import ConfigError, GroundStationError, IdentificationError
+from groundstation.errors import (
+    ConfigError,
+    GroundStationError,
+    IdentificationError,
+    RecorderError,
+)
 from groundstation.logs import configure_logging
 
+# plain help (rich_markup_mode None): rich markup would eat "[hinf]", "[m]" and "[deg]"
 app = typer.Typer(
     name="gs",
     help="Ground station for the AscTec X-3D in a Vicon lab.",
     no_args_is_help=True,
     add_completion=False,
+    rich_markup_mode=None,
 )
 identify_app = typer.Typer(help="Identify model parameters from measurements and flight logs.",
-                           no_args_is_help=True)
+                           no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(identify_app, name="identify")
-synth_app = typer.Typer(help="Synthesise controller gains.", no_args_is_help=True)
+synth_app = typer.Typer(help="Synthesise controller gains.", no_args_is_help=True,
+                        rich_markup_mode=None)
 app.add_typer(synth_app, name="synth")
 calibrate_app = typer.Typer(help="Calibrate a vehicle at rest: IMU zeros and noise, Vicon.",
-                            no_args_is_help=True)
+                            no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(calibrate_app, name="calibrate")
 
-ConfigOption = Annotated[Path, typer.Option("--config", "-c", help="YAML configuration file.")]
-
-
-def _fail(message: str, code: int) -> typer.Exit:
-    typer.echo(f"error: {message}", err=True)
-    return typer.Exit(code)
-
-
-fail = _fail
-"""``raise fail(message, code)``: print ``error: message`` and exit with ``code`` (for
-commands a lab adds, :func:`_add_lab_commands`)."""
+_fail = fail
+"""``raise _fail(message, code)``: ``error: message`` on stderr, exit ``code``
+(:func:`groundstation.cli_options.fail`)."""
 
 
 def _checked_config(path: Path, overrides: dict[str, Any] | None = None) -> GroundStationConfig:
@@ -67,7 +91,7 @@ def _checked_config(path: Path, overrides: dict[str, Any] | None = None) -> Grou
     config = load_config(path)
     if overrides:
         config = apply_overrides(config, overrides)
-    check_files(config, str(path))
+    check_files(config, str(path), key_lines(path))
     return config
 
 
@@ -88,25 +112,66 @@ def version() -> None:
 
 
 @app.command("check-config")
-def check_config(file: Annotated[Path, typer.Argument(help="YAML configuration file.")]) -> None:
-    """Validate a configuration file and print it with every default filled in.
+def check_config(
+    file: Annotated[Path | None, typer.Argument(
+        help="The configuration file, as --config gives it (this positional form is kept "
+             "for scripts that use it).", show_default=False)] = None,
+    config: Annotated[Path | None, typer.Option(
+        "--config", "-c", help="YAML configuration file.")] = None,
+    show: Annotated[bool, typer.Option(
+        "--show", help="Also print the configuration with every default filled in, and the "
+                       "trajectory's check as YAML comments.")] = False,
+) -> None:
+    """Validate a configuration: exit 0 and one verdict line if `gs fly` would start with
+    it, else one line per problem (the field, its line in the file, the reason), a
+    verdict line with the count, and exit 2.
 
     Runs the checks `gs fly` runs before connecting to anything: the file, the files it
     names (waypoint CSV, H-infinity gain, CURVE keys), and the flight built from it
     (estimator, controller, the trajectory shaped and checked against the limits and
-    the volume). Exit code 2 if any of them is refused.
+    the volume).
     """
     from groundstation.loop.core import FlightCore
 
+    if file is not None and config is not None and file != config:
+        raise _fail(f"two configurations given ({file} and --config {config}): check one "
+                    "at a time", 2)
+    path = config if config is not None else file
+    if path is None:
+        raise _fail("check-config needs the configuration: gs check-config --config FILE", 2)
+    configure_logging("warning")  # the verdict says what the flight's info lines would
     try:
-        config = _checked_config(file)
-        FlightCore(config)
-        lines = _trajectory_check(config)[0] if config.trajectory.name != "none" else []
+        cfg = _checked_config(path)
+        FlightCore(cfg)
+        lines = _trajectory_check(cfg)[0] if cfg.trajectory.name != "none" else []
     except (GroundStationError, ValueError, ArithmeticError) as exc:
-        raise _fail(str(exc), 2) from exc
-    typer.echo(dump_config(config), nl=False)
-    for line in lines:  # YAML comments: the output stays a configuration file
+        lines = [line for line in str(exc).splitlines() if line.strip()]
+        # a ConfigError: one line per problem; a refused trajectory: a title, then one
+        # indented line per broken limit
+        count = len(lines) if isinstance(exc, ConfigError) else \
+            max(1, sum(line.startswith(" ") for line in lines))
+        _fail("\n".join(lines), 2)
+        typer.echo(f"{path}: invalid, {count} problem{'s' if count > 1 else ''}", err=True)
+        raise typer.Exit(2) from exc
+    verdict = f"{path}: valid: {_config_summary(cfg, lines)}"
+    if not show:
+        typer.echo(verdict)
+        return
+    typer.echo(dump_config(cfg), nl=False)
+    for line in [*lines, verdict]:  # YAML comments: the output stays a configuration file
         typer.echo(f"# {line}")
+
+
+def _config_summary(config: GroundStationConfig, check: list[str]) -> str:
+    """What a valid configuration flies, in a few words (the verdict line's tail)."""
+    t = config.trajectory
+    what = "trajectory none (run-time commands)" if t.name == "none" else \
+        f"trajectory {t.name}" + (f" ({t.file})" if t.file is not None else "")
+    verdict = next((line.split("verdict: ", 1)[1] for line in check if "verdict: " in line),
+                   None)
+    lab = ", virtual lab (sim)" if config.sim is not None else ""
+    return (f"{what}{': ' + verdict if verdict else ''}; controller {config.controller.type}, "
+            f"serial {config.serial.protocol}{lab}")
 
 
 def _trajectory_overrides(target: str) -> dict[str, Any]:
@@ -137,8 +202,9 @@ def _trajectory_check(config: GroundStationConfig) -> tuple[list[str], Any]:
 @app.command("trajectory")
 def trajectory_command(
     target: Annotated[str, typer.Argument(
-        help="A trajectory file (waypoint CSV t,x,y,z[,yaw] or a uav_trajectories / "
-             "Crazyswarm polynomial CSV) or a trajectory name (square, figure-eight, ...).")],
+        help="A trajectory file (waypoint CSV t,x,y,z[,yaw_deg] or a uav_trajectories / "
+             "Crazyswarm polynomial CSV) or a built-in trajectory: "
+             f"{', '.join(n for n in TRAJECTORY_CHOICES if n != 'none')}.")],
     config: Annotated[Path | None, typer.Option(
         "--config", "-c", help="YAML configuration (limits, volume, centre); default: the "
         "built-in defaults.")] = None,
@@ -190,17 +256,15 @@ def fly(
     vicon_port: Annotated[int | None, typer.Option(help="Vicon UDP port.")] = None,
     vicon_object: Annotated[str | None, typer.Option(help="Vicon object name.")] = None,
     trajectory: Annotated[str | None, typer.Option(
-        help="hover|step-x|step-y|step-z|square|yz-rectangle|low-hover|figure-eight|"
-             "yaw-turn|none, or a trajectory file: a waypoint CSV (t,x,y,z[,yaw]) or a "
-             "uav_trajectories / Crazyswarm polynomial CSV (see `gs trajectory`).")] = None,
-    controller: Annotated[str | None, typer.Option(help="lqr-ff|lqr-cv|lqr-cp|pid|hinf")] = None,
+        metavar="NAME|FILE", help=TRAJECTORY_HELP)] = None,
+    controller: Annotated[Controller | None, typer.Option(
+        help="The controller (controller.type).")] = None,
     duration: Annotated[float | None, typer.Option(
-        help="Seconds on the trajectory before landing (default: one period).")] = None,
+        help="Seconds on the trajectory before landing [s] (default: one period).")] = None,
     log_dir: Annotated[Path | None, typer.Option(help="Flight-log directory.")] = None,
     demo: Annotated[bool, typer.Option(
         help="Start the virtual lab (needs a `sim:` section) and fly it.")] = False,
-    protocol: Annotated[str | None, typer.Option(
-        help="The vehicle's serial dialect: x3d|asctec-ll (serial.protocol).")] = None,
+    protocol: ProtocolOption = None,
 ) -> None:
     """Fly: preflight, take off, track the trajectory, land, hand back to the pilot.
 
@@ -208,6 +272,7 @@ def fly(
     second one (not SIGHUP) at least safety.second_signal_after_s (0.5 s) after
     the first hands back at once.
 
+    \b
     Exit codes:
     0  mission completed: landed and handed back, no failsafe
     1  failsafe or abort: failsafe landing or handback (Vicon lost, volume,
@@ -215,8 +280,8 @@ def fly(
        watchdog expired in the air, link lost, preflight failed, internal error
     2  configuration or usage error, or a trajectory refused before flight
     3  could not start: serial port absent or in use by another flight, Vicon
-       or telemetry port taken, log directory not writable (nothing was sent
-       to the vehicle)
+       or telemetry port taken, no flight-log directory writable (nothing was
+       sent to the vehicle)
     4  stopped on request (SIGINT/SIGTERM, SIGHUP, SIGQUIT): landed, or handed
        back at a second request
     5  flight log incomplete: flown without a failsafe, but rows were lost (disk
@@ -237,11 +302,11 @@ def fly(
 
 @app.command()
 def motors(
-    action: Annotated[str, typer.Argument(help="start|stop")],
+    action: Annotated[MotorAction, typer.Argument(help="Start or stop the motors.")],
     config: ConfigOption,
     serial_port: Annotated[str | None, typer.Option(help="Serial device or URL.")] = None,
-    protocol: Annotated[str | None, typer.Option(
-        help="The vehicle's serial dialect (serial.protocol); the gesture is asctec-ll's.")
+    protocol: Annotated[Literal["asctec-ll"] | None, typer.Option(
+        help="The vehicle's serial dialect (serial.protocol): the gesture is asctec-ll's.")
     ] = None,
 ) -> None:
     """Start or stop the motors with the AscTec LL stick gesture, on this request only.
@@ -251,41 +316,71 @@ def motors(
     followed by a hand-back (ctrl mask 0). Exit 0 when the vehicle reports the motors
     in the state asked for, 1 when it does not or refused, 2 on a usage error.
     """
-    if action not in ("start", "stop"):
-        raise _fail(f"motors: expected start or stop, got {action!r}", 2)
     cfg = load(config, {"serial.port": serial_port, "serial.protocol": protocol})
     from groundstation.loop.motors import motor_gesture_command
 
     raise typer.Exit(motor_gesture_command(cfg, start=action == "start", echo=typer.echo))
 
 
+def _flight_log(path: Path) -> Path:
+    """``path`` if it is a flight log (a flight's directory, or its flight.npy); exit 2
+    with one line naming it if it is not there or not one."""
+    from groundstation.loop.recorder import CONFIG_FILE, FLIGHT_FILE, META_FILE
+
+    if not path.exists():
+        raise _fail(f"{path}: no such flight log (a flight's directory, or its "
+                    f"{FLIGHT_FILE})", 2)
+    directory = path if path.is_dir() else path.parent
+    if path.is_file() and path.name != FLIGHT_FILE:
+        raise _fail(f"{path}: not a flight log (a flight's directory, or its {FLIGHT_FILE})",
+                    2)
+    missing = [name for name in (FLIGHT_FILE, META_FILE, CONFIG_FILE)
+               if not (directory / name).is_file()]
+    if missing:
+        raise _fail(f"{directory}: not a flight log: no {' or '.join(missing)} in it", 2)
+    return path
+
+
+def _input_file(path: Path, what: str) -> Path:
+    """``path`` if it is a readable file; exit 2 with one line naming it if not."""
+    if not path.exists():
+        raise _fail(f"{path}: no such {what}", 2)
+    if not path.is_file():
+        raise _fail(f"{path}: not a {what} (a directory or a device)", 2)
+    return path
+
+
 @app.command()
 def export(
     log: Annotated[Path, typer.Argument(help="Flight-log directory or its flight.npy.")],
     out: Annotated[Path | None, typer.Option(
-        help="Output file (default: stdout; required for parquet and mcap).")] = None,
-    fmt: Annotated[str, typer.Option("--format", help="csv (one column per value, units in "
-                                     "the header), parquet, or mcap (Foxglove, Lichtblick, "
-                                     "PlotJuggler, Rerun)")] = "csv",
+        help="The file to write (default: stdout; required for parquet and mcap).")] = None,
+    fmt: Annotated[ExportFormat, typer.Option(
+        "--format", help="csv: one column per value, units in the header; parquet: full "
+                         "precision; mcap: Foxglove, Lichtblick, PlotJuggler, Rerun.")] = "csv",
 ) -> None:
     """Export a flight log as CSV (one column per value, `name [unit]` header, floats at
     their sensor's precision), Parquet (full precision, units in the field metadata) or
-    MCAP (one JSON-encoded topic per group of columns, Foxglove poses for the 3D view);
-    Parquet and MCAP need the `analysis` extra."""
+    MCAP (JSON topics per group of columns, Foxglove poses, transforms and frames in
+    protobuf for the 3D view); Parquet and MCAP need the `analysis` extra."""
     from groundstation.export import export_csv, export_mcap, export_parquet
 
-    if fmt in ("parquet", "mcap"):
-        if out is None:
-            raise _fail(f"export --format {fmt} needs --out FILE.{fmt}", 2)
-        if fmt == "mcap":
-            typer.echo(f"{export_mcap(log, out)} messages written to {out}", err=True)
-        else:
-            typer.echo(f"{export_parquet(log, out)} rows written to {out}", err=True)
-        return
-    if fmt != "csv":
-        raise _fail(f"export: unknown --format {fmt!r} (csv, parquet or mcap)", 2)
-    # errors (and a reader that went away: exit 141) are main()'s to report
-    rows = export_csv(log, out if out is not None else sys.stdout)
+    _flight_log(log)
+    try:
+        if fmt in ("parquet", "mcap"):
+            if out is None:
+                raise _fail(f"export --format {fmt} needs --out FILE.{fmt}", 2)
+            if fmt == "mcap":
+                typer.echo(f"{export_mcap(log, out)} messages written to {out}", err=True)
+            else:
+                typer.echo(f"{export_parquet(log, out)} rows written to {out}", err=True)
+            return
+        # a reader that went away (exit 141) is main()'s to report
+        rows = export_csv(log, out if out is not None else sys.stdout)
+    except RecorderError as exc:  # the log or the output file: a file that cannot be used
+        if isinstance(exc.__cause__, BrokenPipeError):
+            raise
+        raise _fail(str(exc), 2) from exc
     if out is not None:
         typer.echo(f"{rows} rows written to {out}", err=True)
 
@@ -300,6 +395,7 @@ def replay(
     from groundstation.loop.replay import replay_flight
 
     cfg = load(config) if config is not None else None
+    _flight_log(log)
     try:
         report = replay_flight(str(log), cfg)
     except GroundStationError as exc:
@@ -313,27 +409,36 @@ def report(
     log: Annotated[Path, typer.Argument(help="Flight-log directory.")],
     truth: Annotated[Path | None, typer.Option(
         help="The virtual lab's truth file (.npz) of the same run.")] = None,
-    out: Annotated[Path | None, typer.Option(help="Output directory (default LOG/report).")]
-        = None,
+    out_dir: Annotated[Path | None, typer.Option(
+        "--out-dir", help="Directory to write the report into (default LOG/report; "
+                          "--out, its former spelling, still works).")] = None,
+    out: OutAlias = None,
 ) -> None:
     """Metrics and figures for one recorded flight, real or simulated.
 
-    The truth is ``--truth``, else the ``truth.npz`` that ``gs fly --demo`` keeps in the
+    The truth is `--truth`, else the `truth.npz` that `gs fly --demo` keeps in the
     flight's directory; without one the metrics are computed from the estimate and
     labelled so. Without matplotlib the metrics are still written (a note says so).
+    Exit 2 for a log or truth file that is missing or not one.
     """
     from groundstation.evaluation import report_flight
 
-    if truth is None and (log / "truth.npz").is_file():
+    directory = aliased(out_dir, out, "--out-dir", "--out", None)
+    _flight_log(log)
+    if truth is not None:
+        _input_file(truth, "truth file")
+    elif (log / "truth.npz").is_file():
         truth = log / "truth.npz"
     try:
         try:
-            result = report_flight(log, truth, out)
+            result = report_flight(log, truth, directory)
         except GroundStationError as exc:
             if "matplotlib" not in str(exc):
                 raise
             typer.echo(f"no figures: {exc}", err=True)
-            result = report_flight(log, truth, out, figures=False)
+            result = report_flight(log, truth, directory, figures=False)
+    except RecorderError as exc:  # the log or the truth file cannot be read
+        raise _fail(str(exc), 2) from exc
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
     typer.echo(f"{result.report_md}, {result.metrics_json}"
@@ -341,40 +446,55 @@ def report(
                   f"{result.figure.parent}" if result.figure else ""))
 
 
+TelemetryOption = Annotated[str | None, typer.Option(
+    "--telemetry", help=f"The daemon's telemetry.endpoint (default {DEFAULT_TELEMETRY}; "
+                        "--endpoint, its former spelling, still works).")]
+SecondsRunOption = Annotated[float | None, typer.Option(
+    "--seconds", min=0.0, help="Stop after this many seconds (default: until Ctrl-C; "
+                               "--duration, its former spelling, still works).")]
+
+
 @app.command()
 def monitor(
-    endpoint: Annotated[str, typer.Option(help="Telemetry endpoint to subscribe to.")] =
-        "tcp://127.0.0.1:5556",
-    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds.")] = None,
+    telemetry: TelemetryOption = None, seconds: SecondsRunOption = None,
+    endpoint: EndpointAlias = None, duration: DurationAlias = None,
 ) -> None:
     """Live terminal view of a flying ground station's telemetry (Ctrl-C to quit)."""
     from groundstation.telemetry.monitor import run_monitor
 
+    source = aliased(telemetry, endpoint, "--telemetry", "--endpoint", DEFAULT_TELEMETRY)
+    stop_after = aliased(seconds, duration, "--seconds", "--duration", None)
     try:
-        run_monitor(endpoint, duration)
+        run_monitor(source, stop_after)
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
 
 
 @app.command()
 def foxglove(
-    endpoint: Annotated[str, typer.Option(help="Telemetry endpoint to subscribe to.")] =
-        "tcp://127.0.0.1:5556",
-    host: Annotated[str, typer.Option(help="Address to serve the WebSocket on.")] =
-        "127.0.0.1",
+    telemetry: TelemetryOption = None,
+    host: Annotated[str, typer.Option(
+        help="Address to serve the WebSocket on: 0.0.0.0 (or this machine's lab address) "
+             "for a viewer on another machine, as it should be: the viewer's rendering "
+             "competes with the flight loop for the CPU.")] = "127.0.0.1",
     port: Annotated[int, typer.Option(min=0, max=65535, help="WebSocket port (0: any free).")]
         = 8765,
-    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds.")] = None,
+    seconds: SecondsRunOption = None,
+    endpoint: EndpointAlias = None, duration: DurationAlias = None,
 ) -> None:
     """Live view in Foxglove or Lichtblick: serve the telemetry as a Foxglove WebSocket
     (ws://HOST:PORT; poses, paths and frames in 3D, supervisor state, plots).
 
+    Viewers that speak either subprotocol connect: foxglove.sdk.v1 (Foxglove, current
+    Lichtblick) and the former foxglove.websocket.v1 (Lichtblick releases before it).
     Needs foxglove-sdk, the package's `foxglove` extra. Ctrl-C to quit.
     """
     from groundstation.telemetry.foxglove import run_foxglove
 
+    source = aliased(telemetry, endpoint, "--telemetry", "--endpoint", DEFAULT_TELEMETRY)
+    stop_after = aliased(seconds, duration, "--seconds", "--duration", None)
     try:
-        run_foxglove(endpoint, host=host, port=port, duration=duration, echo=typer.echo)
+        run_foxglove(source, host=host, port=port, duration=stop_after, echo=typer.echo)
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
 
@@ -382,17 +502,21 @@ def foxglove(
 @app.command()
 def channels(
     auto: Annotated[list[str] | None, typer.Argument(
-        help="Channels to put under automatic control (pitch, roll, yaw, thrust); "
+        help="Channels to put under automatic control: pitch, roll, yaw, thrust; "
              "the others go to the pilot. None: show the current set.")] = None,
-    endpoint: Annotated[str, typer.Option(help="The daemon's telemetry.control_endpoint.")] =
-        "tcp://127.0.0.1:5557",
-    timeout: Annotated[float, typer.Option(help="Seconds to wait for the reply.")] = 2.0,
+    control: Annotated[str | None, typer.Option(
+        "--control", help=f"The daemon's telemetry.control_endpoint (default "
+                          f"{DEFAULT_CONTROL}; --endpoint, its former spelling, still "
+                          "works).")] = None,
+    timeout: Annotated[float, typer.Option(
+        help="Seconds to wait for the daemon's reply.")] = REPLY_TIMEOUT_S,
     server_key: Annotated[Path | None, typer.Option(
         help="The daemon's public key (server.key), when it authenticates clients "
              "(telemetry.control_server_key).")] = None,
     client_key: Annotated[Path | None, typer.Option(
         help="This client's key pair (a .key_secret file) whose public half is in the "
              "daemon's telemetry.control_client_keys.")] = None,
+    endpoint: EndpointAlias = None,
 ) -> None:
     """Hand channels between the controller and the pilot while flying (bumpless).
 
@@ -404,6 +528,7 @@ def channels(
     from groundstation.telemetry.control import send_request
     from groundstation.telemetry.curve import CurveClient, load_client_keys
 
+    control_endpoint = aliased(control, endpoint, "--control", "--endpoint", DEFAULT_CONTROL)
     if not (math.isfinite(timeout) and timeout > 0):
         raise _fail(f"--timeout {timeout:g}: must be a positive number of seconds", 2)
     if (server_key is None) != (client_key is None):
@@ -414,11 +539,15 @@ def channels(
             curve = load_client_keys(client_key, server_key)
     except GroundStationError as exc:
         raise _fail(str(exc), 2) from exc
+    unknown = [c for c in auto or () if c not in get_args(ChannelName)]
+    if unknown:  # the daemon would refuse it too; a usage error needs no daemon
+        raise _fail(f"unknown channel {unknown[0]!r} (one of "
+                    f"{', '.join(get_args(ChannelName))})", 2)
     request: dict[str, Any] = {"request": "channels"}
     if auto:
-        request["auto"] = auto
+        request["auto"] = list(auto)
     try:
-        reply = send_request(endpoint, request, timeout, curve=curve)
+        reply = send_request(control_endpoint, request, timeout, curve=curve)
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
     if not reply.get("ok"):
@@ -440,16 +569,21 @@ def identify_thrust(
         = VehicleConfig().gravity,
     as_json: Annotated[bool, typer.Option("--json", help="(flight log) One JSON object keyed "
                                           "by the configuration's field names.")] = False,
-    out: Annotated[Path, typer.Option(help="(flight log) Directory for the figure.")]
-        = Path("."),
+    out_dir: Annotated[Path | None, typer.Option(
+        "--out-dir", help="(flight log) Directory for the figure (default: the working "
+                          "directory; --out, its former spelling, still works).")] = None,
+    out: OutAlias = None,
 ) -> None:
     """Fit the thrust polynomial F_lift(u_thrust) (eq. 3.7) to measurements (App. C.1).
 
-    From a CSV (format in ``groundstation/model/identify.py``;
-    ``tests/data/thrust_table_c1.csv`` is the thesis's Table C.1): the full cubic. From a
+    From a CSV (format in `groundstation/model/identify.py`;
+    `tests/data/thrust_table_c1.csv` is the thesis's Table C.1): the full cubic. From a
     flight log: the lift in steady flight (accelerometer) against the stick, as a scale on
     the configured polynomial (a flight covers the sticks near hover only).
     """
+    out = aliased(out_dir, out, "--out-dir", "--out", Path("."))
+    if not _is_flight_log(source):
+        _input_file(source, "measurement CSV")
     if _is_flight_log(source):
         from groundstation.identification.lift import identify_thrust_log
 
@@ -503,14 +637,19 @@ def identify_inflow(
         help="CSV of steady-climb measurements, or a flight-log directory.")],
     as_json: Annotated[bool, typer.Option("--json", help="(flight log) One JSON object keyed "
                                           "by the configuration's field names.")] = False,
-    out: Annotated[Path, typer.Option(help="(flight log) Directory for the figure.")]
-        = Path("."),
+    out_dir: Annotated[Path | None, typer.Option(
+        "--out-dir", help="(flight log) Directory for the figure (default: the working "
+                          "directory; --out, its former spelling, still works).")] = None,
+    out: OutAlias = None,
 ) -> None:
     """Fit the induced-inflow constant I_i (eq. 3.9) to steady climbs (App. C.2).
 
-    From a CSV (``tests/data/inflow_table_c2.csv`` is the thesis's Table C.2), or from a
+    From a CSV (`tests/data/inflow_table_c2.csv` is the thesis's Table C.2), or from a
     flight log with steady climbs and descents (a waypoint path with vertical legs).
     """
+    out = aliased(out_dir, out, "--out-dir", "--out", Path("."))
+    if not _is_flight_log(source):
+        _input_file(source, "measurement CSV")
     if _is_flight_log(source):
         from groundstation.identification.lift import identify_inflow_log
 
@@ -561,6 +700,9 @@ def _report_fit(result: Any, name: str, out: Path, as_json: bool,
 
 
 LogArgument = Annotated[Path, typer.Argument(help="Flight-log directory.")]
+OutDirOption = Annotated[Path | None, typer.Option(
+    "--out-dir", help="Directory for the figure (default: the working directory; --out, "
+                      "its former spelling, still works).")]
 
 
 @identify_app.command("rates")
@@ -568,7 +710,7 @@ def identify_rates_command(
     log: LogArgument,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object keyed by the "
                                           "configuration's field names.")] = False,
-    out: Annotated[Path, typer.Option(help="Directory for the figure.")] = Path("."),
+    out_dir: OutDirOption = None, out: OutAlias = None,
     with_scales: Annotated[bool, typer.Option(
         help="Identify the gyro scale from the same log first (a gyro scale error is "
              "otherwise a gain error of the same size).")] = False,
@@ -578,59 +720,59 @@ def identify_rates_command(
     Exit 2 for a log that cannot determine them (the message names the axis)."""
     from groundstation.identification import identify_rates, identify_scales
 
+    figures = aliased(out_dir, out, "--out-dir", "--out", Path("."))
+    _flight_log(log)
     try:
         gyro_scale = identify_scales(log, axes=("gyro_x", "gyro_y", "gyro_z")).gyro_scale \
             if with_scales else None
         result = identify_rates(log, gyro_scale=gyro_scale)
     except GroundStationError as exc:
         raise _fail(str(exc), 2) from exc
-    _report_fit(result, "identify-rates", out, as_json)
+    _report_fit(result, "identify-rates", figures, as_json)
 
 
 @identify_app.command("scales")
 def identify_scales_command(
     log: LogArgument,
     axes: Annotated[list[str] | None, typer.Option(
-        "--axis", help="gyro_x|gyro_y|gyro_z|acc_x|acc_y|acc_z (repeatable; default: the "
-                       "gyro and acc_z: in flight the accelerometer's x and y read about "
-                       "zero and need a bench)")] = None,
+        "--axis", help=f"An axis to identify: {', '.join(get_args(ScaleAxis))} (repeatable; "
+                       "default: the gyro and acc_z: in flight the accelerometer's x and y "
+                       "read about zero and need a bench).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object keyed by the "
                                           "configuration's field names.")] = False,
-    out: Annotated[Path, typer.Option(help="Directory for the figure.")] = Path("."),
+    out_dir: OutDirOption = None, out: OutAlias = None,
 ) -> None:
     """Gyro and accelerometer scale factors (Table 6.2) against the body rates and
     specific force the flight's Vicon poses imply, with 95 % intervals. Exit 2 for a log
     that cannot determine them (the message names the axis)."""
     from groundstation.identification import SCALE_AXES, identify_scales
 
+    figures = aliased(out_dir, out, "--out-dir", "--out", Path("."))
     unknown = [a for a in axes or () if a not in SCALE_AXES]
     if unknown:
         raise _fail(f"unknown axis {unknown[0]!r} (one of {', '.join(SCALE_AXES)})", 2)
+    _flight_log(log)
     chosen = tuple(a for a in SCALE_AXES if a in axes) if axes else (
         "gyro_x", "gyro_y", "gyro_z", "acc_z")
     try:
         result = identify_scales(log, axes=chosen)
     except GroundStationError as exc:
         raise _fail(str(exc), 2) from exc
-    _report_fit(result, "identify-scales", out, as_json)
+    _report_fit(result, "identify-scales", figures, as_json)
 
 
 SerialPortOption = Annotated[str | None, typer.Option(help="Serial device or URL.")]
 ViconPortOption = Annotated[int | None, typer.Option(help="Vicon UDP port.")]
 ViconObjectOption = Annotated[str | None, typer.Option(help="Vicon object name.")]
-ProtocolOption = Annotated[str | None, typer.Option(
-    help="The vehicle's serial dialect: x3d|asctec-ll (serial.protocol).")]
 SecondsOption = Annotated[float, typer.Option(min=1.0, help="Measurement length [s].")]
-JsonOption = Annotated[bool, typer.Option(
-    "--json", help="Print one JSON object keyed by the configuration's field names.")]
-OutOption = Annotated[Path, typer.Option(help="Directory for the figure.")]
 
 
 @calibrate_app.command("imu")
 def calibrate_imu_command(
     config: ConfigOption, seconds: SecondsOption = 10.0, serial_port: SerialPortOption = None,
     vicon_port: ViconPortOption = None, vicon_object: ViconObjectOption = None,
-    protocol: ProtocolOption = None, as_json: JsonOption = False, out: OutOption = Path("."),
+    protocol: ProtocolOption = None, as_json: JsonOption = False,
+    out_dir: OutDirOption = None, out: OutAlias = None,
     vicon: Annotated[bool, typer.Option(
         help="Fit the accelerometer to the Vicon attitude (else: the vehicle is level).")] = True,
 ) -> None:
@@ -647,7 +789,8 @@ def calibrate_imu_command(
         result = calibrate_imu(cfg, seconds, use_vicon=vicon)
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
-    _report_fit(result, "calibrate-imu", out, as_json,
+    _report_fit(result, "calibrate-imu", aliased(out_dir, out, "--out-dir", "--out", Path(".")),
+                as_json,
                 {"samples": result.samples, "seconds": result.seconds})
 
 
@@ -655,7 +798,7 @@ def calibrate_imu_command(
 def calibrate_vicon_command(
     config: ConfigOption, seconds: SecondsOption = 10.0, vicon_port: ViconPortOption = None,
     vicon_object: ViconObjectOption = None, as_json: JsonOption = False,
-    out: OutOption = Path("."),
+    out_dir: OutDirOption = None, out: OutAlias = None,
 ) -> None:
     """Vicon noise (Table 6.1), stream rate, jitter and dropped frames, and a frame check.
 
@@ -670,7 +813,8 @@ def calibrate_vicon_command(
         result = calibrate_vicon(cfg, seconds)
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
-    _report_fit(result, "calibrate-vicon", out, as_json,
+    _report_fit(result, "calibrate-vicon",
+                aliased(out_dir, out, "--out-dir", "--out", Path(".")), as_json,
                 {"samples": result.samples, "seconds": result.seconds})
 
 
@@ -718,7 +862,7 @@ def link_check_command(
 @app.command("verify-model")
 def verify_model_command(
     log: Annotated[Path, typer.Argument(help="Flight-log directory.")],
-    as_json: JsonOption = False, out: OutOption = Path("."),
+    as_json: JsonOption = False, out_dir: OutDirOption = None, out: OutAlias = None,
 ) -> None:
     """Thesis Ch. 5: the nonlinear and linear models' quaternion and velocity derivatives
     against the flight's, with a figure (Fig. 5.1-5.4) and the RMS and mean error per axis.
@@ -729,6 +873,8 @@ def verify_model_command(
 
     from groundstation.identification.verify import verify_model
 
+    out = aliased(out_dir, out, "--out-dir", "--out", Path("."))
+    _flight_log(log)
     try:
         result = verify_model(log)
     except GroundStationError as exc:
@@ -756,8 +902,8 @@ def synth_hinf(
 ) -> None:
     """Synthesise the Ch. 10 H-infinity gain from the LMI (eq. 10.12-10.17) and save it.
 
-    Point ``controller.hinf.gain_file`` at the result to fly it. Needs cvxpy:
-    ``pip install 'groundstation[hinf]'``.
+    Point `controller.hinf.gain_file` at the result to fly it. Needs cvxpy:
+    `pip install 'groundstation[hinf]'`.
     """
     from groundstation.control.hinf import synthesise_hinf
     from groundstation.control.hinf_design import HinfWeights
@@ -818,7 +964,8 @@ def main(argv: list[str] | None = None) -> None:
     except GroundStationError as exc:
         if isinstance(exc.__cause__, BrokenPipeError):  # e.g. export_csv's RecorderError
             _quiet_broken_pipe()
-        typer.echo(f"error: {exc}", err=True)
+        for line in str(exc).splitlines() or [""]:  # a ConfigError: one line per problem
+            typer.echo(f"error: {line}", err=True)
         raise SystemExit(2 if isinstance(exc, ConfigError) else 1) from None
     except ImportError as exc:
         extra = OPTIONAL_EXTRAS.get((exc.name or "").partition(".")[0])

@@ -4,6 +4,10 @@ Each is one request to a daemon flying ``--trajectory none`` (:mod:`groundstatio
 in the project's frames: NED metres (1 m above the floor is ``-1``), headings in degrees
 from north. Exit codes: 0 done; 1 refused (the daemon's reason on stderr), no daemon
 answering, a wait that timed out or ended by a failsafe; 2 a usage error.
+
+Options as everywhere in ``gs`` (:mod:`groundstation.cli_options`): ``--control`` the
+daemon's control socket (formerly ``--endpoint``), ``--telemetry`` its publisher,
+``--timeout`` the reply's wait (3 s), ``--wait-timeout`` how long ``--wait`` waits.
 """
 
 from __future__ import annotations
@@ -15,6 +19,13 @@ from typing import Annotated, Any
 
 import typer
 
+from groundstation.cli_options import (
+    REPLY_TIMEOUT_S,
+    WAIT_TIMEOUT_S,
+    EndpointAlias,
+    aliased,
+    fail,
+)
 from groundstation.client import (
     DEFAULT_CONTROL,
     DEFAULT_TELEMETRY,
@@ -24,26 +35,31 @@ from groundstation.client import (
 )
 from groundstation.errors import GroundStationError
 
-Endpoint = Annotated[str, typer.Option(help="The daemon's telemetry.control_endpoint.")]
-Timeout = Annotated[float, typer.Option(help="Seconds to wait for a reply.")]
+Control = Annotated[str | None, typer.Option(
+    "--control", help=f"The daemon's telemetry.control_endpoint (default {DEFAULT_CONTROL}; "
+                      "--endpoint, its former spelling, still works).")]
+Timeout = Annotated[float, typer.Option(help="Seconds to wait for the daemon's reply.")]
 ServerKey = Annotated[Path | None, typer.Option(
     help="The daemon's public key (server.key) when it authenticates clients (CURVE).")]
 ClientKey = Annotated[Path | None, typer.Option(
     help="This client's key pair (.key_secret) whose public half the daemon accepts.")]
 Telemetry = Annotated[str, typer.Option(help="The daemon's telemetry.endpoint (for --wait).")]
+WaitTimeout = Annotated[float, typer.Option(
+    help="How long --wait waits [s] (goto: beyond the move's planned duration).")]
+
+_fail = fail
 
 
-def _fail(message: str, code: int) -> typer.Exit:
-    typer.echo(f"error: {message}", err=True)
-    return typer.Exit(code)
-
-
-def _client(endpoint: str, timeout: float, server_key: Path | None,
-            client_key: Path | None, telemetry: str = DEFAULT_TELEMETRY) -> Client:
+def _client(control: str | None, endpoint: str | None, timeout: float,
+            server_key: Path | None, client_key: Path | None,
+            telemetry: str = DEFAULT_TELEMETRY) -> Client:
+    """The client of ``--control`` (or its former spelling ``--endpoint``); exit 2 for a
+    timeout that is not a positive number or keys that cannot be used."""
+    address = aliased(control, endpoint, "--control", "--endpoint", DEFAULT_CONTROL)
     if not (math.isfinite(timeout) and timeout > 0):
         raise _fail(f"--timeout {timeout:g}: must be a positive number of seconds", 2)
     try:
-        return Client(endpoint, telemetry=telemetry, timeout_s=timeout,
+        return Client(address, telemetry=telemetry, timeout_s=timeout,
                       server_key=server_key, client_key=client_key)
     except GroundStationError as exc:
         raise _fail(str(exc), 2) from exc
@@ -57,7 +73,9 @@ def _line(status: Status) -> str:
     what = "no motion yet" if motion is None else \
         f"motion {motion.id} {motion.kind} {motion.state}"
     battery = "" if status.battery_v is None else f"  battery {status.battery_v:.2f} V"
-    return (f"{status.state}  at {xyz(status.position)}  reference {xyz(status.reference)}  "
+    heading = "" if status.yaw_deg is None else f" heading {status.yaw_deg:+.0f} deg"
+    return (f"{status.state}  at {xyz(status.position)}{heading}  reference "
+            f"{xyz(status.reference)} heading {status.reference_yaw_deg:+.0f} deg  "
             f"{what}{battery}")
 
 
@@ -70,10 +88,13 @@ def goto(
     duration: Annotated[float | None, typer.Option(
         help="Seconds the move takes; default: sized by the daemon within its limits.")] = None,
     wait: Annotated[bool, typer.Option(help="Return once arrived.")] = False,
-    endpoint: Endpoint = DEFAULT_CONTROL, timeout: Timeout = 3.0,
+    wait_timeout: WaitTimeout = WAIT_TIMEOUT_S,
+    control: Control = None, timeout: Timeout = REPLY_TIMEOUT_S,
     server_key: ServerKey = None, client_key: ClientKey = None,
+    endpoint: EndpointAlias = None,
 ) -> None:
-    """Move to X Y Z (NED metres) and hold there; refused (exit 1) with the daemon's reason
+    """Move to X Y Z (NED metres in the lab's frame: from Tracker's origin on the floor, not
+    from the take-off point) and hold there; refused (exit 1) with the daemon's reason
     when it cannot be flown.
 
     Example: `gs goto 0.5 0 -1 --yaw 90 --wait`.
@@ -85,10 +106,14 @@ def goto(
         raise _fail(f"--yaw {yaw:g}: a heading within one turn, [-360, 360] degrees", 2)
     if duration is not None and not duration > 0.0:
         raise _fail(f"--duration {duration:g}: a positive number of seconds", 2)
-    client = _client(endpoint, timeout, server_key, client_key)
+    if not (math.isfinite(wait_timeout) and wait_timeout > 0.0):
+        raise _fail(f"--wait-timeout {wait_timeout:g}: a positive number of seconds", 2)
+    client = _client(control, endpoint, timeout, server_key, client_key)
     try:
-        motion = client.go_to([x, y, z], None if yaw is None else math.radians(yaw), duration,
-                              wait=wait)
+        motion = client.go_to([x, y, z], yaw_deg=yaw, duration=duration)
+        if wait:
+            arrived = client.wait_until_arrived(motion, motion.duration_s + wait_timeout)
+            motion = arrived.motion or motion
     except ClientError as exc:
         raise _fail(str(exc), 1) from exc
     typer.echo(f"motion {motion.id}: {motion.kind} to ({x:+.2f}, {y:+.2f}, {z:+.2f}) m "
@@ -97,14 +122,17 @@ def goto(
 
 def land(
     wait: Annotated[bool, typer.Option(help="Return once landed and handed back.")] = False,
-    wait_timeout: Annotated[float, typer.Option(help="Seconds --wait waits.")] = 60.0,
-    endpoint: Endpoint = DEFAULT_CONTROL, telemetry: Telemetry = DEFAULT_TELEMETRY,
-    timeout: Timeout = 3.0,
+    wait_timeout: WaitTimeout = WAIT_TIMEOUT_S,
+    control: Control = None, telemetry: Telemetry = DEFAULT_TELEMETRY,
+    timeout: Timeout = REPLY_TIMEOUT_S,
     server_key: ServerKey = None, client_key: ClientKey = None,
+    endpoint: EndpointAlias = None,
 ) -> None:
     """Land now: the flight ends normally (the daemon exits 0 once handed back). With
     --wait, exit 0 only once it has landed and handed back without a failsafe."""
-    client = _client(endpoint, timeout, server_key, client_key, telemetry)
+    if not (math.isfinite(wait_timeout) and wait_timeout > 0.0):
+        raise _fail(f"--wait-timeout {wait_timeout:g}: a positive number of seconds", 2)
+    client = _client(control, endpoint, timeout, server_key, client_key, telemetry)
     try:
         ended = client.land(wait=wait, timeout=wait_timeout)
     except ClientError as exc:
@@ -118,11 +146,12 @@ def land(
 
 
 def hold(
-    endpoint: Endpoint = DEFAULT_CONTROL, timeout: Timeout = 3.0,
+    control: Control = None, timeout: Timeout = REPLY_TIMEOUT_S,
     server_key: ServerKey = None, client_key: ClientKey = None,
+    endpoint: EndpointAlias = None,
 ) -> None:
     """Stop the motion in progress as soon as the limits allow and hold there."""
-    client = _client(endpoint, timeout, server_key, client_key)
+    client = _client(control, endpoint, timeout, server_key, client_key)
     try:
         motion = client.hold()
     except ClientError as exc:
@@ -132,12 +161,15 @@ def hold(
 
 
 def status(
-    as_json: Annotated[bool, typer.Option("--json", help="The whole reply as JSON.")] = False,
-    endpoint: Endpoint = DEFAULT_CONTROL, timeout: Timeout = 3.0,
+    as_json: Annotated[bool, typer.Option(
+        "--json", help="The whole reply as JSON (as on the wire: headings in radians).")]
+        = False,
+    control: Control = None, timeout: Timeout = REPLY_TIMEOUT_S,
     server_key: ServerKey = None, client_key: ClientKey = None,
+    endpoint: EndpointAlias = None,
 ) -> None:
     """The flight now: supervisor state, estimate, reference, motion, battery."""
-    client = _client(endpoint, timeout, server_key, client_key)
+    client = _client(control, endpoint, timeout, server_key, client_key)
     try:
         now = client.status()
     except ClientError as exc:

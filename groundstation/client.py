@@ -9,9 +9,16 @@ motion (:class:`Preempted`); a client that goes away leaves the vehicle finishin
 checked motion and then holding, and the daemon lands after ``api.idle_land_s`` without
 a command.
 
-Frames and units are the project's: positions NED [m] (1 m above the floor is
-``z = -1``), headings [rad] from north, times [s]. The command-line equivalents
-(``gs goto``, ``gs land``, ``gs hold``, ``gs status``) take the heading in degrees.
+Frames and units are the project's: positions NED [m] in the lab's frame (from
+Tracker's origin on the floor, not from the take-off point; :meth:`Client.takeoff`'s
+height alone is above the take-off point; 1 m above the floor is
+``z = -1``), times [s], and headings in degrees from north, clockwise seen from above,
+as everywhere a user gives one (``trajectory.yaw_deg``, ``gs goto --yaw``, a waypoint
+CSV's ``yaw_deg`` column): ``go_to(..., yaw_deg=90)`` faces east, and the replies report
+``yaw_deg``, ``reference_yaw_deg`` and ``target_yaw_deg``. (Until this release the client
+took and reported radians: the ``yaw=`` keyword and the ``yaw``, ``reference_yaw`` and
+``target_yaw`` attributes still work, in radians, with a DeprecationWarning. The wire
+format, :mod:`groundstation.loop.api`, stays in radians.)
 
 Example (``examples/fly_square.py`` flies a square)::
 
@@ -19,7 +26,7 @@ Example (``examples/fly_square.py`` flies a square)::
 
     gs = Client()  # nothing to close: every request opens and closes its own socket
     gs.wait_for_state("TRACK", timeout=30)
-    gs.go_to([0.5, 0.0, -1.0], wait=True)
+    gs.go_to([0.5, 0.0, -1.0], yaw_deg=90, wait=True)
     gs.land(wait=True)
 
 Every request is one JSON message on the daemon's control socket
@@ -31,6 +38,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,6 +53,9 @@ DEFAULT_CONTROL = "tcp://127.0.0.1:5557"
 """The daemon's default ``telemetry.control_endpoint``."""
 DEFAULT_TELEMETRY = "tcp://127.0.0.1:5556"
 """The daemon's default ``telemetry.endpoint``."""
+DEFAULT_TIMEOUT_S = 3.0
+"""How long a request waits for the daemon's reply by default [s] (``gs ... --timeout``
+has the same default)."""
 POLL_S = 0.05
 """How often the blocking helpers ask for the status [s]."""
 PLAN_WAIT_S = 10.0
@@ -80,7 +91,7 @@ class Refused(ClientError):  # noqa: N818 (a refusal, not a fault of the client)
 
 class BadRequest(Refused):
     """Malformed or absurd: a position that is not 3 finite numbers, a heading beyond one
-    turn, a duration outside [0.2, 600] s, a ``start_at`` beyond the daemon's
+    turn (+-360 degrees), a duration outside [0.2, 600] s, a ``start_at`` beyond the daemon's
     ``api.start_horizon_s``, an unknown field or request."""
 
     kind = "request"
@@ -146,9 +157,9 @@ class Motion:
 
     id : its number in this flight; kind : go_to, follow or hold; state : moving, arrived,
     superseded (by a later motion) or preempted (by a failsafe), with ``reason``;
-    target : where it comes to rest, NED [m]; target_yaw : the heading there [rad] (None:
-    kept); duration_s : planned time until at rest [s]; latency_s : request received to
-    the reference starting to move [s] (None until it moved); arrived_at : when it
+    target : where it comes to rest, NED [m]; target_yaw_deg : the heading there [deg from
+    north] (None: kept); duration_s : planned time until at rest [s]; latency_s : request
+    received to the reference starting to move [s] (None until it moved); arrived_at : when it
     arrived, on the daemon's monotonic clock (``time.monotonic()`` on the same machine)
     [s] (None until then).
     """
@@ -158,18 +169,24 @@ class Motion:
     state: str
     reason: str
     target: tuple[float, float, float]
-    target_yaw: float | None
+    target_yaw_deg: float | None
     duration_s: float
     latency_s: float | None
     arrived_at: float | None = None
 
     @classmethod
     def from_reply(cls, data: Mapping[str, Any]) -> Motion:
-        """From a reply's ``motion`` object."""
+        """From a reply's ``motion`` object (its ``target_yaw`` in radians on the wire)."""
         x, y, z = (float(v) for v in data["target"])
         return cls(int(data["id"]), str(data["kind"]), str(data["state"]),
-                   str(data.get("reason", "")), (x, y, z), data.get("target_yaw"),
+                   str(data.get("reason", "")), (x, y, z), _degrees(data.get("target_yaw")),
                    float(data["duration_s"]), data.get("latency_s"), data.get("arrived_at"))
+
+    @property
+    def target_yaw(self) -> float | None:
+        """Deprecated: :attr:`target_yaw_deg` in radians."""
+        _warn_radians("Motion.target_yaw", "target_yaw_deg")
+        return None if self.target_yaw_deg is None else math.radians(self.target_yaw_deg)
 
 
 @dataclass(frozen=True, slots=True)
@@ -179,19 +196,21 @@ class Status:
     state : the supervisor's state (PREFLIGHT, TAKEOFF, TRACK, HOLD, LAND, DISARM, DONE,
     HANDBACK, LINK_LOST, ABORTED) and ``reason`` its last transition's reason;
     position, velocity : the estimate, NED [m], [m/s] (None before the estimator runs);
-    yaw : its heading [rad]; reference, reference_yaw : what is tracked, NED [m], [rad];
-    ground : where it took off, NED [m]; motion : the latest motion (None before any);
+    yaw_deg : its heading [deg from north]; reference, reference_yaw_deg : what is
+    tracked, NED [m], [deg from north]; ground : where it took off, NED [m]; motion : the
+    latest motion (None before any);
     battery_v [V]; idle_land_in_s : seconds until the idle landing (None while moving);
-    commanded : the flight takes motions (``--trajectory none``); raw : the whole reply.
+    commanded : the flight takes motions (``--trajectory none``); raw : the whole reply
+    (as on the wire: headings in radians).
     """
 
     state: str
     reason: str
     position: tuple[float, float, float] | None
     velocity: tuple[float, float, float] | None
-    yaw: float | None
+    yaw_deg: float | None
     reference: tuple[float, float, float]
-    reference_yaw: float
+    reference_yaw_deg: float
     ground: tuple[float, float, float]
     motion: Motion | None
     battery_v: float | None
@@ -208,11 +227,24 @@ class Status:
         return cls(
             str(data["state"]), str(data.get("reason", "")),
             _xyz(est["position"]) if est else None, _xyz(est["velocity"]) if est else None,
-            float(est["yaw"]) if est else None, _xyz(data["reference"]["position"]),
-            float(data["reference"]["yaw"]), _xyz(data["ground"]),
+            math.degrees(float(est["yaw"])) if est else None,
+            _xyz(data["reference"]["position"]),
+            math.degrees(float(data["reference"]["yaw"])), _xyz(data["ground"]),
             Motion.from_reply(motion) if motion else None,
             float(battery) if isinstance(battery, int | float) else None,
             data.get("idle_land_in_s"), bool(data.get("commanded")), dict(data))
+
+    @property
+    def yaw(self) -> float | None:
+        """Deprecated: :attr:`yaw_deg` in radians."""
+        _warn_radians("Status.yaw", "yaw_deg")
+        return None if self.yaw_deg is None else math.radians(self.yaw_deg)
+
+    @property
+    def reference_yaw(self) -> float:
+        """Deprecated: :attr:`reference_yaw_deg` in radians."""
+        _warn_radians("Status.reference_yaw", "reference_yaw_deg")
+        return math.radians(self.reference_yaw_deg)
 
     @property
     def error_m(self) -> float | None:
@@ -245,6 +277,17 @@ def _xyz(values: Sequence[Any]) -> tuple[float, float, float]:
     return x, y, z
 
 
+def _degrees(radians: Any) -> float | None:
+    """A heading from the wire [rad] in degrees, or None."""
+    return None if radians is None else math.degrees(float(radians))
+
+
+def _warn_radians(old: str, new: str) -> None:
+    """Warn that the radian attribute ``old`` is deprecated for ``new`` (degrees)."""
+    warnings.warn(f"{old} is in radians and deprecated: use {new} (degrees)",
+                  DeprecationWarning, stacklevel=3)
+
+
 # --------------------------------------------------------------------------- the client
 class Client:
     """A connection to a running daemon.
@@ -257,7 +300,7 @@ class Client:
     """
 
     def __init__(self, endpoint: str = DEFAULT_CONTROL, *, telemetry: str = DEFAULT_TELEMETRY,
-                 timeout_s: float = 3.0, plan_wait_s: float = PLAN_WAIT_S,
+                 timeout_s: float = DEFAULT_TIMEOUT_S, plan_wait_s: float = PLAN_WAIT_S,
                  server_key: str | Path | None = None,
                  client_key: str | Path | None = None) -> None:
         self.endpoint = endpoint
@@ -291,15 +334,26 @@ class Client:
         """The flight now."""
         return Status.from_reply(self.request({"request": "status"}))
 
-    def go_to(self, position: Sequence[float], yaw: float | None = None,
-              duration: float | None = None, *, wait: bool = False,
-              timeout: float | None = None) -> Motion:
-        """Move to ``position`` (NED [m]) and stop there, turning to ``yaw`` [rad] (None:
-        keep the heading), in ``duration`` [s] (None: the daemon sizes it from
-        ``api.speed_m_s`` and the limits). ``wait``: return once arrived (see
-        :meth:`wait_until_arrived`; ``timeout`` defaults to the duration plus 10 s)."""
+    def go_to(self, position: Sequence[float], *, yaw_deg: float | None = None,
+              duration: float | None = None, wait: bool = False,
+              timeout: float | None = None, yaw: float | None = None) -> Motion:
+        """Move to ``position`` (NED [m]) and stop there, turning to ``yaw_deg`` [deg from
+        north, within +-360] (None: keep the heading), in ``duration`` [s] (None: the
+        daemon sizes it from ``api.speed_m_s`` and the limits). ``wait``: return once
+        arrived (see :meth:`wait_until_arrived`; ``timeout`` defaults to the duration plus
+        10 s). ``yaw`` [rad] is the deprecated former keyword (DeprecationWarning).
+
+        Everything after the position is keyword-only, so a call written for the radian
+        API (``go_to(p, 1.57)``) fails at once instead of turning to 1.57 degrees."""
+        if yaw is not None:
+            if yaw_deg is not None:
+                raise BadRequest("yaw_deg and the deprecated yaw (radians) both given")
+            warnings.warn("go_to(yaw=...) is in radians and deprecated: use yaw_deg=",
+                          DeprecationWarning, stacklevel=2)
+            yaw_deg = math.degrees(yaw)
+        heading = None if yaw_deg is None else math.radians(yaw_deg)  # the wire: radians
         motion = self._motion({"request": "go_to", "position": [float(v) for v in position],
-                               "yaw": yaw, "duration": duration})
+                               "yaw": heading, "duration": duration})
         return self._maybe_wait(motion, wait, timeout)
 
     def takeoff(self, height: float, *, timeout: float = 60.0, wait: bool = True) -> Motion:
@@ -313,8 +367,10 @@ class Client:
                duration: float | None = None, start_at: float | None = None,
                wait: bool = False, timeout: float | None = None) -> Motion:
         """Fly a trajectory: a mapping like the configuration's ``trajectory:`` section
-        (``{"name": "figure-eight", "period_s": 10, "center": [0, 0, -1]}``), or a waypoint
-        CSV (``t, x, y, z[, yaw]`` rows: s, NED m, rad), read here and sent. The vehicle
+        (``{"name": "figure-eight", "period_s": 10, "center": [0, 0, -1], "yaw_deg": 90}``),
+        or a waypoint CSV (``t, x, y, z[, yaw_deg]`` rows: s, NED m, degrees; a heading
+        column named ``yaw`` or ``yaw_rad``, or none of them named, is in radians, as
+        other tools write it), read here and sent. The vehicle
         goes to its start, flies it for ``duration`` [s] (None: one lap, or the whole
         path) from ``start_at`` (a ``time.time()`` [s]; None: on arrival at the start), and
         holds at its end."""

@@ -290,6 +290,17 @@ def _strict_scalars(schema: Any) -> None:
             _strict_scalars(value)
 
 
+class FieldValueError(ValueError):
+    """A refusal by a model validator (one that sees several fields) that one field must
+    fix: ``field`` (its name in the model) and its ``value``. The error report then names
+    that field, its value and its line in the file, not the whole section."""
+
+    def __init__(self, field: str, value: object, message: str) -> None:
+        super().__init__(message)
+        self.field = field
+        self.value = value
+
+
 class ConfigModel(BaseModel):
     """Base: unknown keys are errors, instances are immutable, numbers are numbers.
 
@@ -696,11 +707,18 @@ class VehicleConfig(ConfigModel):
     @model_validator(mode="after")
     def _can_hover(self) -> VehicleConfig:
         max_lift = -min(float(np.polyval(self.thrust_poly, u)) for u in range(0, 4097, 64))
-        if max_lift <= self.mass_kg * self.gravity:
-            raise ValueError(
-                f"thrust_poly lifts at most {max_lift:.2f} N, less than the weight "
-                f"{self.mass_kg * self.gravity:.2f} N: the vehicle could not hover"
-            )
+        weight = self.mass_kg * self.gravity
+        if max_lift <= weight:
+            # blame the field the file set: the mass, unless only thrust_poly was given
+            given = self.model_fields_set
+            if "thrust_poly" in given and "mass_kg" not in given:
+                raise FieldValueError("thrust_poly", self.thrust_poly, (
+                    f"lifts at most {max_lift:.2f} N, less than the weight {weight:.2f} N "
+                    f"(mass_kg {self.mass_kg:g} kg): the vehicle could not hover"))
+            raise FieldValueError("mass_kg", self.mass_kg, (
+                f"weighs {weight:.2f} N, more than thrust_poly lifts at most "
+                f"({max_lift:.2f} N): the vehicle could not hover (the mass of this "
+                "vehicle, or a thrust_poly fitted to it: gs identify thrust)"))
         return self
 
 
@@ -1266,9 +1284,13 @@ _Loader.add_implicit_resolver("tag:yaml.org,2002:float", _YAML12_EXPONENT_FLOAT,
                               list("-+0123456789"))
 
 
-def _check_keys(root: yaml.Node, source: str) -> None:
+def _check_keys(root: yaml.Node, source: str) -> dict[str, int]:
     """Refuse a mapping key given twice (YAML would keep the last silently) and a file
-    that expands past :data:`MAX_YAML_VALUES` values. Walks aliases as expanded."""
+    that expands past :data:`MAX_YAML_VALUES` values. Walks aliases as expanded.
+
+    Returns the line (from 1) of every key and list item by its dotted path
+    (``vehicle.mass_kg``, ``safety.volume_x.0``), for error messages."""
+    lines: dict[str, int] = {}
     budget = MAX_YAML_VALUES
     stack: list[tuple[yaml.Node, str]] = [(root, "")]
     while stack:
@@ -1278,8 +1300,10 @@ def _check_keys(root: yaml.Node, source: str) -> None:
             raise ConfigError(f"{source}: expands to more than {MAX_YAML_VALUES} values "
                               "(through YAML aliases): not a configuration")
         if isinstance(node, yaml.SequenceNode):
-            stack += [(item, f"{path}.{i}" if path else str(i))
-                      for i, item in enumerate(node.value)]
+            for i, item in enumerate(node.value):
+                here = f"{path}.{i}" if path else str(i)
+                lines.setdefault(here, item.start_mark.line + 1)
+                stack.append((item, here))
         elif isinstance(node, yaml.MappingNode):
             first: dict[str, int] = {}
             for key, value in node.value:
@@ -1296,9 +1320,10 @@ def _check_keys(root: yaml.Node, source: str) -> None:
                 stack.append((value, here))
 
 
-def _parse_yaml(raw: bytes, source: str) -> Any:
-    """The YAML document in ``raw``; ConfigError (one line) for anything that is not one
-    UTF-8 YAML document without repeated keys."""
+def _parse_yaml(raw: bytes, source: str) -> tuple[Any, dict[str, int]]:
+    """The YAML document in ``raw`` and the line of each key (:func:`_check_keys`);
+    ConfigError (one line) for anything that is not one UTF-8 YAML document without
+    repeated keys."""
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -1316,9 +1341,9 @@ def _parse_yaml(raw: bytes, source: str) -> Any:
     try:
         node = loader.get_single_node()
         if node is None:
-            return None
-        _check_keys(node, source)
-        return loader.construct_document(node)
+            return None, {}
+        lines = _check_keys(node, source)
+        return loader.construct_document(node), lines
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark else source
@@ -1329,7 +1354,9 @@ def _parse_yaml(raw: bytes, source: str) -> Any:
     except RecursionError:
         raise ConfigError(f"{source}: not valid YAML: nested too deeply") from None
     finally:
+                lines.setdefault(here, line)
         loader.dispose()
+    return lines
 
 
 def _line_column(before: str) -> str:
@@ -1344,10 +1371,11 @@ def _clip(value: object, chars: int = 1000) -> str:
 
 
 def _problems(exc: ValidationError) -> list[tuple[str, object, str]]:
-    """One (field path, value, reason) per pydantic error."""
+    """One (field path, value, reason) per pydantic error; a :class:`FieldValueError` is
+    reported at the field it names."""
     out = []
     for err in exc.errors(include_url=False):
-        path = ".".join(str(p) for p in err["loc"]) or "<root>"
+        loc = tuple(err["loc"])
         reason = err["msg"].removeprefix("Value error, ")
         value = err.get("input")
         if err["type"] == "extra_forbidden":
@@ -1369,14 +1397,32 @@ def describe_problems(exc: ValidationError) -> str:
     return "; ".join(f"{path}: {reason}" for path, _value, reason in _problems(exc))
 
 
-def _raise(problems: list[tuple[str, object, str]], source: str) -> None:
-    lines = [f"{source}: {len(problems)} configuration error(s)"]
-    lines += [f"  {path}: {_clip(value)}: {reason}" for path, value, reason in problems]
-    raise ConfigError("\n".join(lines), problems)
+def _line_of(path: str, lines: dict[str, int]) -> int | None:
+    """The line of ``path`` in the file, else of its nearest enclosing key (a missing
+    field: its section), else None."""
+    while path:
+        if path in lines:
+            return lines[path]
+        path = path.rpartition(".")[0]
+    return None
 
 
-def validate_config(data: dict[str, Any], source: str = "<config>") -> GroundStationConfig:
-    """Validate a parsed mapping; raise ConfigError naming every bad field."""
+def _raise(problems: list[tuple[str, object, str]], source: str,
+           lines: dict[str, int] | None = None) -> None:
+    """ConfigError with one line per problem: ``SOURCE:LINE: field: value: reason``
+    (``SOURCE: field: ...`` where the line is not known: defaults, overrides)."""
+    out = []
+    for path, value, reason in problems:
+        line = _line_of(path, lines or {})
+        where = source if line is None else f"{source}:{line}"
+        out.append(f"{where}: {path}: {_clip(value)}: {reason}")
+    raise ConfigError("\n".join(out), problems)
+
+
+def validate_config(data: dict[str, Any], source: str = "<config>",
+                    lines: dict[str, int] | None = None) -> GroundStationConfig:
+    """Validate a parsed mapping; raise ConfigError naming every bad field (and its line,
+    from ``lines``: dotted path -> line in the file, as :func:`_check_keys` finds them)."""
     if not isinstance(data, dict):
         _raise([("<root>", data, "the file must hold a mapping of sections")], source)
     problems: list[tuple[str, object, str]] = []
@@ -1386,9 +1432,15 @@ def validate_config(data: dict[str, Any], source: str = "<config>") -> GroundSta
         config = GroundStationConfig.model_validate(sections)
     except ValidationError as exc:
         problems += _problems(exc)
+        cause = (err.get("ctx") or {}).get("error")
+        if isinstance(cause, FieldValueError):  # the value as the file wrote it
+            loc = (*loc, cause.field)
+            value = value.get(cause.field, cause.value) if isinstance(value, dict) \
+                else cause.value
+        path = ".".join(str(p) for p in loc) or "<root>"
     sim = _lab_section(data.get("sim"), problems)
     if problems or config is None:
-        _raise(problems, source)
+        _raise(problems, source, lines)
         raise AssertionError("unreachable")
     return config if sim is None else config.model_copy(update={"sim": sim})
 
@@ -1427,17 +1479,29 @@ def load_config(path: str | Path) -> GroundStationConfig:
     if len(raw) > MAX_FILE_BYTES:
         raise ConfigError(f"{path}: larger than {MAX_FILE_BYTES >> 10} KiB: "
                           "not a configuration")
-    data = _parse_yaml(raw, str(path))
+    data, lines = _parse_yaml(raw, str(path))
     if data is None:
         raise ConfigError(f"{path}: empty (no sections, only comments or nothing): a "
                           "configuration names at least one section; see config/lab.yaml")
-    return validate_config(data, str(path))
+    return validate_config(data, str(path), lines)
 
 
-def check_files(config: GroundStationConfig, source: str = "<config>") -> None:
+def key_lines(path: str | Path) -> dict[str, int]:
+    """The line of every key of a configuration file by its dotted path (empty if the
+    file cannot be read or parsed: then :func:`load_config` says why)."""
+    try:
+        raw = Path(path).read_bytes()[:MAX_FILE_BYTES + 1]
+        return _parse_yaml(raw, str(path))[1]
+    except (OSError, ConfigError):
+        return {}
+
+
+def check_files(config: GroundStationConfig, source: str = "<config>",
+                lines: dict[str, int] | None = None) -> None:
     """Check that the files the configuration names exist and can be used, as the flight
     will open them: the waypoint CSV, the H-infinity gain, the control socket's CURVE
-    keys. Raises ConfigError naming every field whose file cannot be used.
+    keys. Raises ConfigError naming every field whose file cannot be used (and its line in
+    the file: ``lines`` as :func:`key_lines` gives them).
 
     Relative paths are taken from the working directory, as the flight takes them.
     """
@@ -1470,7 +1534,7 @@ def check_files(config: GroundStationConfig, source: str = "<config>") -> None:
             problems.append(("telemetry.control_client_keys", str(t.control_client_keys),
                              str(exc)))
     if problems:
-        _raise(problems, source)
+        _raise(problems, source, lines)
 
 
 def apply_overrides(

@@ -13,33 +13,57 @@ from typing import Annotated
 
 import typer
 
-from groundstation.cli import ConfigOption, fail, load
+from groundstation.cli import load
+from groundstation.cli_options import (
+    ConfigOption,
+    DurationAlias,
+    OutAlias,
+    ProtocolOption,
+    aliased,
+    fail,
+)
 from groundstation.errors import ConfigError, GroundStationError
+
+SCENARIO_NAMES = (
+    "hover-1hz", "hover-10hz", "hover-100hz", "step-x", "step-y", "step-z", "square-pid",
+    "square-lqr-cp", "square-lqr-cv", "yz-rectangle-pid", "yz-rectangle-lqr-cp",
+    "yz-rectangle-lqr-cv", "low-hover", "square-vicon-outage", "hover-thrust-error",
+    "square-thrust-error", "hinf-thesis-model", "hinf-rate-loop-model", "figure-eight-lqr-ff",
+    "figure-eight-pid", "figure-eight-lqr-cp", "figure-eight-lqr-cv", "yaw-turn",
+    "square-shaped-lqr-ff", "square-shaped-h135-lqr-ff", "square-shaped-pid",
+    "square-shaped-lqr-cp", "square-shaped-lqr-cv", "takeoff-h135", "hover-h90", "hover-h180",
+    "hover-h270", "hinf-rate-gains-low", "hinf-rate-gains-high", "file-eight-8s",
+    "file-eight-4s", "file-figure8", "hover-exact-angles",
+)
+"""The scenarios ``gs eval --scenario`` takes, in suite order, for its help (importing the
+suite to list them would slow every ``gs`` command; a test checks they are the suite's)."""
 
 
 def sim_device(
     config: ConfigOption,
-    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds.")] = None,
+    seconds: Annotated[float | None, typer.Option(
+        "--seconds", min=0.0, help="Stop after this many seconds (default: until Ctrl-C; "
+                                   "--duration, its former spelling, still works).")] = None,
     truth_file: Annotated[Path | None, typer.Option(help="Ground-truth .npz path.")] = None,
     json: Annotated[bool, typer.Option(
         "--json", help="Print where the lab is as one JSON line first (for programs: "
                        "serial_port, vicon_target, truth_file).")] = False,
-    protocol: Annotated[str | None, typer.Option(
-        help="The vehicle's serial dialect: x3d|asctec-ll (overrides serial.protocol).")]
-        = None,
+    protocol: ProtocolOption = None,
+    duration: DurationAlias = None,
 ) -> None:
     """Run the virtual X-3D (pty) and virtual Vicon (UDP) in real time until Ctrl-C.
 
-    Prints the pty path to use as ``--serial-port`` and the Vicon UDP target, and
-    writes the ground truth on exit (also on SIGINT/SIGTERM). With ``--json`` the first
-    line is the same as JSON (``groundstation.lab.Announcement``). With ``--protocol
-    asctec-ll`` the vehicle speaks the AscTec LL dialect (answers polls, acknowledges
-    commands; ``serial.ll`` of the configuration).
+    Prints the pty path to use as `--serial-port` and the Vicon UDP target, and
+    writes the ground truth on exit (also on SIGINT/SIGTERM). With `--json` the first
+    line is the same as JSON (`groundstation.lab.Announcement`). With `--protocol
+    asctec-ll` the vehicle speaks the AscTec LL dialect (answers polls, acknowledges
+    commands; `serial.ll` of the configuration).
     """
+    stop_after = aliased(seconds, duration, "--seconds", "--duration", None)
     cfg = load(config, {"serial.protocol": protocol})
     from sim_device.realtime import run_sim_device
 
-    run_sim_device(cfg, truth_file=truth_file, duration=duration, announce=typer.echo,
+    run_sim_device(cfg, truth_file=truth_file, duration=stop_after, announce=typer.echo,
                    on_ready=(lambda info: typer.echo(info.announcement.to_json())) if json
                    else None)
 
@@ -49,28 +73,33 @@ def evaluate(
     fast: Annotated[bool, typer.Option(
         help="In-process on the simulated clock (default: real time over the pty and UDP).")]
         = False,
-    out: Annotated[Path, typer.Option(help="Report directory.")] = Path("eval_out"),
+    out_dir: Annotated[Path | None, typer.Option(
+        "--out-dir", help="Report directory (default eval_out; --out, its former spelling, "
+                          "still works).")] = None,
     scenario: Annotated[list[str] | None, typer.Option(
-        help="Fly only these scenarios (repeatable; default all).")] = None,
+        help="Fly only this scenario (repeatable; default all): "
+             f"{', '.join(SCENARIO_NAMES)}.")] = None,
     perturb: Annotated[list[str] | None, typer.Option(
         help="Fly every scenario on the plant drawn for this seed (repeatable; a range "
              "1-5 or a list 1,4); the report gives the worst case over the seeds.")] = None,
+    out: OutAlias = None,
 ) -> None:
     """Fly the thesis's Ch. 11 flight tests and issue 13's in the virtual lab; write a report.
 
-    Metrics come from the virtual lab's ground truth; the report is ``report.md`` with
-    PNG figures mirroring Fig. 11.1-11.8 and ``metrics.json``. With ``--perturb`` the
+    Metrics come from the virtual lab's ground truth; the report is `report.md` with
+    PNG figures mirroring Fig. 11.1-11.8 and `metrics.json`. With `--perturb` the
     virtual vehicle differs from the design model (rate gains, rate-loop lag, mass,
     thrust, delay, IMU errors: see sim_device/evaluation/perturb.py).
     """
     from sim_device.evaluation import run_eval
     from sim_device.evaluation.perturb import parse_seeds
 
+    report_dir = aliased(out_dir, out, "--out-dir", "--out", Path("eval_out"))
     cfg = load(config)
     try:
         seeds = parse_seeds(perturb or [])
-        report = run_eval(cfg, fast=fast, out_dir=out, scenarios=scenario, progress=typer.echo,
-                          perturb=seeds)
+        report = run_eval(cfg, fast=fast, out_dir=report_dir, scenarios=scenario,
+                          progress=typer.echo, perturb=seeds)
     except GroundStationError as exc:
         raise fail(str(exc), 2 if isinstance(exc, ConfigError) else 1) from exc
     typer.echo(f"{len(report.outcomes)} scenarios in {report.wall_s:.0f} s: {report.report_md}, "

@@ -67,8 +67,8 @@ def test_channels_talks_to_the_control_socket() -> None:
 
     def handler(request: dict[str, object]) -> dict[str, object]:
         seen.append(request)
-        if request.get("auto") == ["elevator"]:
-            return {"ok": False, "error": "'auto' must list one or more of ..."}
+        if request.get("auto") == ["yaw"]:  # the daemon's refusal (here: in a test's mood)
+            return {"ok": False, "error": "yaw alone is not allowed now"}
         return {"ok": True, "auto": ["thrust"], "state": "TRACK"}
 
     with ControlServer("tcp://127.0.0.1:*") as server:
@@ -83,14 +83,17 @@ def test_channels_talks_to_the_control_socket() -> None:
         thread.start()
         try:
             ok = runner.invoke(app, ["channels", "thrust", "--endpoint", server.endpoint])
+            refused = runner.invoke(app, ["channels", "yaw", "--control", server.endpoint])
             bad = runner.invoke(app, ["channels", "elevator", "--endpoint", server.endpoint])
         finally:
             stop.set()
             thread.join(5.0)
     assert ok.exit_code == 0 and "automatic: thrust  (state TRACK)" in ok.output
-    assert bad.exit_code == 1 and "must list one or more" in bad.output
+    assert refused.exit_code == 1 and "yaw alone is not allowed now" in refused.output
+    # not a channel: a usage error, named, and nothing sent
+    assert bad.exit_code == 2 and "unknown channel 'elevator'" in bad.output
     assert seen == [{"request": "channels", "auto": ["thrust"]},
-                    {"request": "channels", "auto": ["elevator"]}]
+                    {"request": "channels", "auto": ["yaw"]}]
 
 
 def test_channels_with_curve_keys(tmp_path: Path) -> None:
@@ -144,8 +147,8 @@ def _config_file(tmp_path: Path, text: str) -> Path:
 
 
 def test_check_config_refuses_a_trajectory_outside_the_volume(tmp_path: Path) -> None:
-    good = runner.invoke(app, ["check-config", str(_config_file(tmp_path, "trajectory:\n"
-                                                                "  name: square\n"))])
+    good = runner.invoke(app, ["check-config", "--show", str(_config_file(
+        tmp_path, "trajectory:\n  name: square\n"))])
     assert good.exit_code == 0, good.output
     assert "shaping: min-jerk" in good.output
     bad = _config_file(tmp_path, "trajectory:\n  name: square\n  center: [0.0, 1.2, -1.0]\n")

@@ -33,9 +33,9 @@ def test_the_console_script_is_the_boundary() -> None:
 @pytest.mark.parametrize(("args", "code", "text"), [
     (("check-config", "missing.yaml"), 2, "missing.yaml: cannot read"),
     (("check-config", "config"), 2, "config: cannot read"),
-    (("report", "no-such-log"), 1, "not a readable flight log"),
-    (("export", "no-such-log"), 1, "not a readable flight log"),
-    (("replay", "no-such-log"), 1, "no-such-log"),
+    (("report", "no-such-log"), 2, "no-such-log: no such flight log"),
+    (("export", "no-such-log"), 2, "no-such-log: no such flight log"),
+    (("replay", "no-such-log"), 2, "no-such-log: no such flight log"),
 ])
 def test_a_users_mistake_is_one_line_and_a_code(args: tuple[str, ...], code: int,
                                                 text: str) -> None:
@@ -43,7 +43,11 @@ def test_a_users_mistake_is_one_line_and_a_code(args: tuple[str, ...], code: int
     assert out.returncode == code, out.stderr
     assert text in out.stderr
     assert "Traceback" not in out.stderr
-    assert out.stderr.strip().startswith("error:") and out.stderr.count("\n") == 1
+    lines = out.stderr.splitlines()
+    assert lines[0].startswith("error:") and text in lines[0]
+    # check-config ends with its verdict; everything else says it in one line
+    assert lines[1:] == ([f"{args[1]}: invalid, 1 problem"] if args[0] == "check-config"
+                         else [])
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +71,7 @@ def test_a_truth_file_that_is_not_one_is_an_error_line(flight_log: Path,
     bad = tmp_path / "other.npy"
     np.save(bad, np.arange(10.0))
     out = _gs("report", str(flight_log), "--truth", str(bad), "--out", str(tmp_path / "r"))
-    assert out.returncode == 1, out.stderr
+    assert out.returncode == 2, out.stderr  # a file that is not what the command expects
     assert "other.npy" in out.stderr and "Traceback" not in out.stderr
 
 

@@ -70,7 +70,7 @@ def _error_for(data: dict[str, object]) -> ConfigError:
         ({"controller": {"lqr": {"r_input": [1.0, 1.0, 0.0, 1.0]}}},
          "controller.lqr.r_input.2", "outside [1e-06, 1e+06]"),
         ({"serial": {"sensors": ["status", "gyro"]}}, "serial.sensors", "'acc'"),
-        ({"vehicle": {"mass_kg": 5.0}}, "vehicle", "could not hover"),
+        ({"vehicle": {"mass_kg": 5.0}}, "vehicle.mass_kg", "could not hover"),  # the mass
         ({"safety": {"volume_x": [1.0, -1.0]}}, "safety.volume_x", "min < max"),
         ({"safety": {"handback_tilt_deg": 30.0}}, "safety", "exceed max_tilt_deg"),
         ({"controller": {"type": "hinf", "hinf": {"gain_file": "/nonexistent.npz"}}},
@@ -137,7 +137,7 @@ def test_dump_round_trips() -> None:
 
 
 def test_cli_check_config(repo: Path, tmp_path: Path) -> None:
-    ok = runner.invoke(app, ["check-config", str(repo / "config" / "lab.yaml")])
+    ok = runner.invoke(app, ["check-config", "--show", str(repo / "config" / "lab.yaml")])
     assert ok.exit_code == 0, ok.output
     assert "thrust_poly" in ok.output and "0.0086" in ok.output
     bad = tmp_path / "bad.yaml"

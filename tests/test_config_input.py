@@ -140,7 +140,7 @@ def test_a_curve_protected_control_socket_may_bind_beyond_loopback(tmp_path: Pat
     path = _write(tmp_path, keys, f"telemetry:\n  control_endpoint: tcp://*:5557\n"
                                   f"  control_server_key: {keys}/server.key_secret\n"
                                   f"  control_client_keys: {keys}/clients\n".encode())
-    res = runner.invoke(app, ["check-config", str(path)])
+    res = runner.invoke(app, ["check-config", "--show", str(path)])
     assert res.exit_code == 0, res.output
     assert "control_endpoint: tcp://*:5557" in res.output
 

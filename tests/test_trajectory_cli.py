@@ -82,7 +82,7 @@ def test_check_config_prints_what_the_file_was_taken_to_be(tmp_path: Path) -> No
     config = tmp_path / "gs.yaml"
     config.write_text(LAB.read_text().replace(
         "trajectory:\n  name: square", f"trajectory:\n  name: waypoints\n  file: {FIGURE8}"))
-    result = runner.invoke(app, ["check-config", str(config)])
+    result = runner.invoke(app, ["check-config", "--show", str(config)])
     assert result.exit_code == 0, result.output
     assert "# trajectory 'waypoints': polynomial segments" in result.output
     assert "#   verdict: flyable within the limits" in result.output
