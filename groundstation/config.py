@@ -976,7 +976,9 @@ class TrajectoryConfig(ConfigModel):
     name: TrajectoryName = "square"
     center: list[LabCoordinate] = Field(default_factory=lambda: [0.0, 0.0, -1.0],
                                         min_length=3, max_length=3)
-    # hover point / square centre, NED [m]: 1 m above the floor as Ch. 11.1 and 11.3
+    # hover point / square centre, NED [m]: 1 m above the floor as Ch. 11.1 and 11.3;
+    # in the lab's frame (from Tracker's origin on the floor), not from the take-off
+    # point: a flight climbs above where it stands, then flies here (docs/lab-setup.md)
     size_m: LabLength = 0.75  # square side, Ch. 11.3 (0.75 m x 0.75 m)
     period_s: FlightTime = 20.0  # one lap, Ch. 11.3
     step_m: LabLength = 0.5  # step amplitude for step-x/y/z, tuned to stay in the volume

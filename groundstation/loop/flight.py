@@ -10,8 +10,9 @@ Returns the process exit code (:data:`EXIT_CODES`, printed by ``gs fly --help``)
 2. configuration or usage error, or a trajectory refused before flight: nothing was
    connected;
 3. could not start: a resource could not be opened (the serial port absent or in use
-   by another flight, the Vicon or telemetry port taken, the log directory not
-   writable); nothing was sent to the vehicle;
+   by another flight, the Vicon or telemetry port taken, no flight-log directory
+   writable: the configured one, else a user's, :mod:`groundstation.loop.logdir`);
+   nothing was sent to the vehicle;
 4. stopped on request (SIGINT/SIGTERM, SIGHUP: the terminal went away, SIGQUIT) without
    a failsafe: landed, or handed back at a second request or as ``safety.on_signal``
    configures;
@@ -62,7 +63,8 @@ EXIT_CODES: dict[int, str] = {
     EXIT_USAGE: "configuration or usage error, or a trajectory refused before flight "
                 "(nothing connected)",
     EXIT_NOT_STARTED: "could not start: serial port absent or in use, Vicon or telemetry "
-                      "port taken, log directory not writable (nothing sent to the vehicle)",
+                      "port taken, no flight-log directory writable (nothing sent to the "
+                      "vehicle)",
     int(Outcome.STOPPED): "stopped on request (SIGINT/SIGTERM, SIGHUP, SIGQUIT): landed, or "
                           "handed back at a second request",
     EXIT_LOG_INCOMPLETE: "flight log incomplete: flown without a failsafe, but rows were "
