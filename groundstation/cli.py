@@ -31,6 +31,7 @@ from groundstation.cli_options import (
     TRAJECTORY_CHOICES,
     TRAJECTORY_HELP,
     Controller,
+    Dialect,
     DurationAlias,
     EndpointAlias,
     ExportFormat,
@@ -302,11 +303,11 @@ def fly(
 
 @app.command()
 def motors(
-    action: Annotated[MotorAction, typer.Argument(help="Start or stop the motors.")],
+    action: Annotated[str, typer.Argument(help="start or stop: what to do with the motors.")],
     config: ConfigOption,
     serial_port: Annotated[str | None, typer.Option(help="Serial device or URL.")] = None,
-    protocol: Annotated[Literal["asctec-ll"] | None, typer.Option(
-        help="The vehicle's serial dialect (serial.protocol): the gesture is asctec-ll's.")
+    protocol: Annotated[Dialect | None, typer.Option(
+        help="The vehicle's serial dialect (serial.protocol); the gesture is asctec-ll's.")
     ] = None,
 ) -> None:
     """Start or stop the motors with the AscTec LL stick gesture, on this request only.
@@ -316,6 +317,8 @@ def motors(
     followed by a hand-back (ctrl mask 0). Exit 0 when the vehicle reports the motors
     in the state asked for, 1 when it does not or refused, 2 on a usage error.
     """
+    if action not in get_args(MotorAction):
+        raise _fail(f"motors: expected start or stop, got {action!r}", 2)
     cfg = load(config, {"serial.port": serial_port, "serial.protocol": protocol})
     from groundstation.loop.motors import motor_gesture_command
 

@@ -16,18 +16,22 @@ Parquet (:func:`export_parquet`, the ``analysis`` extra's pyarrow)
     each field's metadata (``unit``), ``state_name`` as a dictionary (pandas: categorical)
     column after ``state``, and meta.json, the configuration and the exporter's version as
     JSON in the schema metadata (key ``groundstation``).
-MCAP (:func:`export_mcap`, the ``analysis`` extra's mcap), for Foxglove, Lichtblick,
-PlotJuggler and Rerun
-    One MCAP message per logged tick and topic, JSON-encoded with a JSON Schema per
-    channel, so the viewers decode every channel without a ROS installation. Poses use
-    Foxglove's ``foxglove.PoseInFrame`` layout (frame ``ned``; orientation ``x, y, z,
-    w``), which the 3D panel draws; everything else is a plain JSON object whose keys are
-    the flight log's own column names with their units in the schema's descriptions. The
-    channel table :data:`CHANNELS` assigns every column of the flight log to exactly one
-    topic. Log time is wall-clock (``start_time`` plus the tick's monotonic time since
-    ``start_monotonic``, both in meta.json); each message keeps its monotonic ``t`` [s].
-    The configuration and the version are MCAP metadata records (``config``,
-    ``groundstation``).
+MCAP (:func:`export_mcap`, written by foxglove-sdk's MCAP writer: the ``analysis``
+extra), for Foxglove, Lichtblick, PlotJuggler and Rerun
+    One MCAP message per logged tick and topic. The columns travel as JSON with a JSON
+    Schema per channel that every viewer parses (one type per field, real properties):
+    plain objects whose keys are the flight log's own column names, with their units in
+    the schema's descriptions; the channel table :data:`CHANNELS` assigns every column of
+    the flight log to exactly one topic. The 3D view's channels are Foxglove's own
+    schemas in protobuf, as the live ``gs foxglove`` sends them, which Foxglove,
+    Lichtblick and Rerun all decode: ``foxglove.PoseInFrame`` poses (``/pose/vicon``,
+    ``/pose/estimate``, ``/pose/reference``, frame ``ned``) and ``foxglove.FrameTransforms``
+    on ``/tf``: the fixed ``world -> ned`` (``world`` is z up, so a viewer whose z is up
+    draws the flight above its grid, not below it) and ``ned -> base_link`` (the FRD body
+    at the estimate). Log time is wall-clock (``start_time`` plus the tick's monotonic
+    time since ``start_monotonic``, both in meta.json); each JSON message keeps its
+    monotonic ``t`` [s]. The configuration and the version are MCAP metadata records
+    (``config``, ``groundstation``).
 """
 
 from __future__ import annotations
@@ -46,8 +50,11 @@ from groundstation import __version__
 from groundstation.errors import GroundStationError, RecorderError
 from groundstation.loop.recorder import COLUMN_UNITS, FLAT_DTYPE, RECORD_DTYPE, read_flight
 from groundstation.telemetry.foxglove import (
+    TF,
     foxglove_quaternion,
+    frame_transforms,
     pose_in_frame,
+    sdk_message,
     timestamp_ns,
     yaw_quaternion,
 )
@@ -76,19 +83,13 @@ POSE_TOPICS = {"/pose/vicon": ("vicon_position", "vicon_quaternion"),
                "/pose/reference": ("ref_position", "ref_yaw")}
 """Poses in Foxglove's layout for the 3D panel (the same values as the topics above)."""
 
-_POSE_SCHEMA: dict[str, Any] = {
-    "title": "foxglove.PoseInFrame", "type": "object",
-    "properties": {
-        "timestamp": {"type": "object", "properties": {"sec": {"type": "integer"},
-                                                       "nsec": {"type": "integer"}}},
-        "frame_id": {"type": "string"},
-        "pose": {"type": "object", "properties": {
-            "position": {"type": "object", "properties": {
-                k: {"type": "number", "description": "NED [m]"} for k in "xyz"}},
-            "orientation": {"type": "object", "properties": {
-                k: {"type": "number"} for k in "xyzw"}}}},
-    },
-}
+FOXGLOVE_TOPICS: dict[str, str] = {**dict.fromkeys(POSE_TOPICS, "foxglove.PoseInFrame"),
+                                   TF: "foxglove.FrameTransforms"}
+"""The protobuf channels (Foxglove's schemas), topic -> schema name; every tick's ``/tf``
+holds ``world -> ned`` and, with an estimate, ``ned -> base_link``."""
+
+MISSING_SDK = ("MCAP export needs foxglove-sdk (its MCAP writer and Foxglove's schemas): "
+               "pip install 'groundstation[analysis]'")
 
 
 def _unit(name: str) -> str:
@@ -129,76 +130,88 @@ def _value(v: Any) -> Any:
 
 
 def export_mcap(log: str | Path, out: str | Path) -> int:
-    """Write the flight log ``log`` as the MCAP file ``out``; return the messages written.
+    """Write the flight log ``log`` as the MCAP file ``out`` (replaced if it exists);
+    return the messages written.
 
-    RecorderError if the log cannot be read; GroundStationError if the ``mcap`` package
-    (the ``analysis`` extra) is missing or the file cannot be written.
+    RecorderError if the log cannot be read or the file cannot be written;
+    GroundStationError if foxglove-sdk (the ``analysis`` extra) is missing.
     """
     try:
-        from mcap.writer import CompressionType, Writer
+        import foxglove
+        from foxglove import channels as fc
     except ImportError as exc:
-        raise GroundStationError("MCAP export needs the mcap package: pip install "
-                                 "'groundstation[analysis]'") from exc
+        raise GroundStationError(MISSING_SDK) from exc
     rows, meta, config = read_flight(log)
     start = dt.datetime.fromisoformat(str(meta.get("start_time", "1970-01-01T00:00:00+00:00")))
     start_ns = int(start.timestamp() * 1e9)
     mono0 = float(meta.get("start_monotonic", rows["t"][0] if len(rows) else 0.0))
     names = list(meta.get("supervisor_states", []))
+    context = foxglove.Context()  # private: nothing else logged here lands in the file
+    try:
+        writer = foxglove.open_mcap(out, allow_overwrite=True, context=context)
+    except (OSError, RuntimeError) as exc:  # RuntimeError: the SDK's FoxgloveError
+        raise RecorderError(f"cannot write {out}: {exc}") from exc
+    typed: dict[str, Any] = {"foxglove.PoseInFrame": fc.PoseInFrameChannel,
+                             "foxglove.FrameTransforms": fc.FrameTransformsChannel}
+    json_channels: dict[str, Any] = {
+        topic: foxglove.Channel(topic, schema=_column_schema(topic, columns), context=context)
+        for topic, columns in CHANNELS.items()}
+    proto_channels: dict[str, Any] = {topic: typed[schema](topic, context=context)
+                      for topic, schema in FOXGLOVE_TOPICS.items()}
     count = 0
     try:
-        with open(out, "wb") as fh:
-            writer = Writer(fh, compression=CompressionType.ZSTD)
-            writer.start(profile="", library=f"groundstation {__version__}")
-            channel_ids = {}
+        for row in rows:
+            t = float(row["t"])
+            log_ns = start_ns + round((t - mono0) * 1e9)
             for topic, columns in CHANNELS.items():
-                schema = writer.register_schema(
-                    name=f"groundstation{topic.replace('/', '.')}", encoding="jsonschema",
-                    data=json.dumps(_column_schema(topic, columns)).encode())
-                channel_ids[topic] = writer.register_channel(topic, "json", schema)
-            pose_schema = writer.register_schema(name="foxglove.PoseInFrame",
-                                                 encoding="jsonschema",
-                                                 data=json.dumps(_POSE_SCHEMA).encode())
-            for topic in POSE_TOPICS:
-                channel_ids[topic] = writer.register_channel(topic, "json", pose_schema)
-            for row in rows:
-                t = float(row["t"])
-                log_ns = start_ns + round((t - mono0) * 1e9)
-                stamp = timestamp_ns(log_ns)
-                for topic, columns in CHANNELS.items():
-                    msg: dict[str, Any] = {"t": t}
-                    msg.update({name: _value(row[name]) for name in columns})
-                    if topic == "/supervisor":
-                        state = int(row["state"])
-                        msg["state_name"] = names[state] if state < len(names) else str(state)
-                    writer.add_message(channel_ids[topic], log_time=log_ns, publish_time=log_ns,
-                                       data=json.dumps(msg).encode())
-                    count += 1
-                for topic, (pos, att) in POSE_TOPICS.items():
-                    p = row[pos]
-                    if not np.all(np.isfinite(p)):
-                        continue
-                    try:
-                        orientation = yaw_quaternion(float(row[att])) if att.endswith("_yaw") \
-                            else foxglove_quaternion(row[att])
-                    except ValueError:  # a quaternion that is no rotation (NaN, zero)
-                        continue
-                    if not all(math.isfinite(v) for v in orientation.values()):
-                        continue  # a NaN heading
-                    pose = pose_in_frame(stamp, {"x": float(p[0]), "y": float(p[1]),
-                                                 "z": float(p[2])}, orientation)
-                    writer.add_message(channel_ids[topic], log_time=log_ns, publish_time=log_ns,
-                                       data=json.dumps(pose).encode())
-                    count += 1
-            writer.add_metadata("config", {"yaml": config})
-            writer.add_metadata("groundstation", {
-                "version": str(meta.get("version", "")), "exporter_version": __version__,
-                "schema_version": str(meta.get("schema_version", "")),
-                "start_time": str(meta.get("start_time", "")),
-                "start_monotonic": str(mono0)})
-            writer.finish()  # type: ignore[no-untyped-call]
-    except OSError as exc:
+                msg: dict[str, Any] = {"t": t}
+                msg.update({name: _value(row[name]) for name in columns})
+                if topic == "/supervisor":
+                    state = int(row["state"])
+                    msg["state_name"] = names[state] if state < len(names) else str(state)
+                json_channels[topic].log(msg, log_time=log_ns)
+                count += 1
+            for topic, schema, body in _foxglove_messages(row, timestamp_ns(log_ns)):
+                proto_channels[topic].log(sdk_message(schema, body), log_time=log_ns)
+                count += 1
+        writer.write_metadata("config", {"yaml": config})
+        writer.write_metadata("groundstation", {
+            "version": str(meta.get("version", "")), "exporter_version": __version__,
+            "schema_version": str(meta.get("schema_version", "")),
+            "start_time": str(meta.get("start_time", "")),
+            "start_monotonic": str(mono0)})
+        writer.close()
+    except (OSError, RuntimeError) as exc:
         raise RecorderError(f"cannot write {out}: {exc}") from exc
+    finally:
+        for channel in (*json_channels.values(), *proto_channels.values()):
+            channel.close()
     return count
+
+
+def _foxglove_messages(row: np.void, stamp: dict[str, int]
+                       ) -> list[tuple[str, str, dict[str, Any]]]:
+    """One tick's Foxglove messages ``(topic, schema, body)``: a pose per POSE_TOPICS whose
+    values are finite rotations and positions, and the ``/tf`` transforms."""
+    out: list[tuple[str, str, dict[str, Any]]] = []
+    body: tuple[dict[str, float], dict[str, float]] | None = None
+    for topic, (pos, att) in POSE_TOPICS.items():
+        p = row[pos]
+        if not np.all(np.isfinite(p)):
+            continue
+        try:
+            orientation = yaw_quaternion(float(row[att])) if att.endswith("_yaw") \
+                else foxglove_quaternion(row[att])
+        except ValueError:  # a quaternion that is no rotation (NaN, zero)
+            continue
+        if not all(math.isfinite(v) for v in orientation.values()):
+            continue  # a NaN heading
+        position = {"x": float(p[0]), "y": float(p[1]), "z": float(p[2])}
+        out.append((topic, FOXGLOVE_TOPICS[topic], pose_in_frame(stamp, position, orientation)))
+        if topic == "/pose/estimate":
+            body = (position, orientation)
+    out.append((TF, FOXGLOVE_TOPICS[TF], frame_transforms(stamp, body)))
+    return out
 
 
 # --------------------------------------------------------------------------- CSV and Parquet

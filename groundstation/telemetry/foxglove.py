@@ -5,9 +5,13 @@ the daemon's telemetry (:mod:`groundstation.telemetry.schema`) and serves the Fo
 WebSocket protocol with the official ``foxglove-sdk``, so Foxglove and Lichtblick show
 the vehicle in 3D, the reference path, the supervisor state and live plots. Needs the
 ``foxglove`` extra: ``pip install 'groundstation[foxglove]'``. The SDK (0.30) speaks
-the protocol under its current subprotocol name ``foxglove.sdk.v1`` only; a client that
-offers only the former name ``foxglove.websocket.v1`` (same messages; older Lichtblick
-releases) is refused at the handshake.
+the protocol under its current subprotocol name ``foxglove.sdk.v1`` only and refuses a
+client that offers only the former name ``foxglove.websocket.v1`` (the same messages;
+Lichtblick's releases): so the SDK's server listens on loopback only and viewers connect
+to a relay (:mod:`groundstation.telemetry.ws_relay`) that accepts either name.
+
+The JSON channels' schemas are ones every viewer parses: one type per field, objects
+with their properties (:func:`groundstation.telemetry.schema.state_json_schema`).
 
 Two layers:
 
@@ -41,7 +45,13 @@ from typing import Any
 
 from groundstation.errors import TelemetryError
 from groundstation.telemetry.client import TelemetryClient
-from groundstation.telemetry.schema import SCHEMA_VERSION, TOPIC_HEALTH, TOPIC_STATE
+from groundstation.telemetry.schema import (
+    SCHEMA_VERSION,
+    TOPIC_HEALTH,
+    TOPIC_STATE,
+    health_json_schema,
+    state_json_schema,
+)
 
 NED_FRAME = "ned"
 """The earth frame (NED) the poses and paths are expressed in."""
@@ -80,18 +90,15 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
             "name": {"type": "string", "description": "state name, e.g. TRACK"},
             "final": {"type": "boolean",
                       "description": "true on the last state message of a flight"},
-            "flight_time_s": {"type": ["number", "null"],
-                              "description": "time since take-off [s], if published"},
+            "flight_time_s": {"type": "number",  # absent when not published: no union
+                              "description": "time since the flight loop started [s]"},
         },
     },
-    STATE: {"title": CHANNELS[STATE], "type": "object",
-            "description": "telemetry topic 'state' as published (groundstation.telemetry."
-                           "schema): NED [m], FRD body, SI units, sticks in RC units"},
-    HEALTH: {"title": CHANNELS[HEALTH], "type": "object",
-             "description": "telemetry topic 'health' as published (groundstation."
-                            "telemetry.schema): rates [Hz], counters, times [s]"},
+    STATE: state_json_schema(CHANNELS[STATE]),
+    HEALTH: health_json_schema(CHANNELS[HEALTH]),
 }
-"""JSON Schemas of the JSON channels (the viewers use them for field names and plots)."""
+"""JSON Schemas of the JSON channels (the viewers use them for field names and plots):
+one type per field and real properties, as every viewer's parser needs."""
 
 MISSING_EXTRA = ("gs foxglove needs the optional package foxglove-sdk: "
                  "pip install 'groundstation[foxglove]'")
@@ -239,29 +246,25 @@ class LiveView:
         supervisor = payload.get("supervisor")
         if isinstance(supervisor, Mapping):
             flight_time = payload.get("flight_time_s", supervisor.get("flight_time_s"))
-            out.append((SUPERVISOR, {
+            message = {
                 "state": supervisor.get("state"), "name": supervisor.get("name"),
-                "final": bool(payload.get("final", supervisor.get("final", False))),
-                "flight_time_s": flight_time if isinstance(flight_time, int | float) else None,
-            }))
+                "final": bool(payload.get("final", supervisor.get("final", False)))}
+            if isinstance(flight_time, int | float):  # else absent (the schema: a number)
+                message["flight_time_s"] = flight_time
+            out.append((SUPERVISOR, message))
         out.append((STATE, dict(payload)))
 
-        transforms: list[dict[str, Any]] = [{
-            "timestamp": stamp, "parent_frame_id": WORLD_FRAME, "child_frame_id": NED_FRAME,
-            "translation": {"x": 0.0, "y": 0.0, "z": 0.0}, "rotation": dict(_WORLD_TO_NED)}]
+        body: tuple[dict[str, float], dict[str, float]] | None = None
         estimate = payload.get("estimate")
         if isinstance(estimate, Mapping):
             position = _vector3(estimate.get("position"))
             orientation = _quaternion(estimate.get("quaternion"))
             if position is not None and orientation is not None:
                 out.append((POSE_ESTIMATE, pose_in_frame(stamp, position, orientation)))
-                transforms.append({
-                    "timestamp": stamp, "parent_frame_id": NED_FRAME,
-                    "child_frame_id": BODY_FRAME, "translation": position,
-                    "rotation": orientation})
+                body = (position, orientation)
                 if isinstance(t, int | float):
                     self.paths[PATH_ESTIMATE].append(float(t), position)
-        out.append((TF, {"transforms": transforms}))
+        out.append((TF, frame_transforms(stamp, body)))
 
         reference = payload.get("reference")
         if isinstance(reference, Mapping):
@@ -292,6 +295,22 @@ class LiveView:
             "lifetime": {"sec": 0, "nsec": 0}, "frame_locked": False,
             "lines": [{"type": _LINE_STRIP, "thickness": thickness, "scale_invariant": True,
                        "points": points, "color": dict(color)}]}]}
+
+
+def frame_transforms(stamp: dict[str, int],
+                     body: tuple[dict[str, float], dict[str, float]] | None
+                     ) -> dict[str, Any]:
+    """A ``foxglove.FrameTransforms``: the fixed ``world -> ned`` (so a viewer whose z is up
+    draws the flight above its grid) and, given the body's ``(position, orientation)`` in
+    :data:`NED_FRAME` (Foxglove ``{x, y, z}`` [m], ``{x, y, z, w}``), ``ned -> base_link``."""
+    transforms: list[dict[str, Any]] = [{
+        "timestamp": stamp, "parent_frame_id": WORLD_FRAME, "child_frame_id": NED_FRAME,
+        "translation": {"x": 0.0, "y": 0.0, "z": 0.0}, "rotation": dict(_WORLD_TO_NED)}]
+    if body is not None:
+        transforms.append({
+            "timestamp": stamp, "parent_frame_id": NED_FRAME, "child_frame_id": BODY_FRAME,
+            "translation": dict(body[0]), "rotation": dict(body[1])})
+    return {"transforms": transforms}
 
 
 def pose_in_frame(stamp: dict[str, int], position: dict[str, float],
@@ -386,29 +405,39 @@ def run_foxglove(
     passes, ``stop`` is set, or SIGINT/SIGTERM (None: until interrupted); return the
     number of telemetry messages received.
 
-    ``port`` 0 picks a free port; the first line ``echo`` gets names the URL actually
-    served (``foxglove: serving ws://HOST:PORT ...``). Raises TelemetryError if the
-    ``foxglove`` extra is missing (:data:`MISSING_EXTRA`), the port cannot be bound, or
-    the endpoint is invalid."""
+    The SDK's server listens on loopback (a free port); viewers connect to the relay on
+    ``host:port`` with either subprotocol name. ``port`` 0 picks a free port; the first
+    line ``echo`` gets names the URL actually served (``foxglove: serving ws://HOST:PORT
+    ...``). Raises TelemetryError if the ``foxglove`` extra is missing
+    (:data:`MISSING_EXTRA`), the port cannot be bound, or the endpoint is invalid."""
     try:
         import foxglove
     except ImportError as exc:
         raise TelemetryError(MISSING_EXTRA) from exc
+    from groundstation.telemetry.ws_relay import SubprotocolRelay
 
     view = LiveView() if view is None else view
     context = foxglove.Context()
     channels = _open_channels(foxglove, context)
     try:
-        server = foxglove.start_server(name="groundstation", host=host, port=port,
+        server = foxglove.start_server(name="groundstation", host="127.0.0.1", port=0,
                                        context=context)
-    except RuntimeError as exc:  # the SDK's FoxgloveError, e.g. the port is taken
+    except RuntimeError as exc:  # the SDK's FoxgloveError
         for channel in channels.values():
             channel.close()
-        raise TelemetryError(f"foxglove: cannot serve on {host}:{port}: {exc}") from exc
+        raise TelemetryError(f"foxglove: cannot start the server: {exc}") from exc
+    relay = SubprotocolRelay(f"ws://127.0.0.1:{server.port}", host, port)
+    try:
+        relay.start()
+    except TelemetryError:
+        server.stop()
+        for channel in channels.values():
+            channel.close()
+        raise
     received, warned = 0, False
     try:
         with TelemetryClient(endpoint) as client, _until_stopped() as signalled:
-            echo(f"foxglove: serving ws://{host}:{server.port} (telemetry {endpoint}); "
+            echo(f"foxglove: serving ws://{host}:{relay.port} (telemetry {endpoint}); "
                  f"open it in Foxglove or Lichtblick")
             end = None if duration is None else time.monotonic() + duration
             while not signalled.is_set() and not (stop is not None and stop.is_set()):
@@ -436,6 +465,7 @@ def run_foxglove(
                     else:
                         channel.log(body, log_time=log_time)
     finally:
+        relay.stop()
         server.stop()
         for channel in channels.values():
             channel.close()

@@ -169,3 +169,108 @@ def health_payload(
     return {"link": jsonable(link), "vicon": jsonable(vicon),
             "estimator": jsonable(estimator), "loop": jsonable(loop),
             "control": jsonable(control)}
+
+
+# --------------------------------------------------------------------------- JSON Schemas
+# What a viewer needs to offer the fields for plots and panels (Foxglove, Lichtblick): every
+# field with one type (viewers refuse unions such as ["number", "null"]: a value that is
+# not there is null or absent, which no viewer checks against the schema), an object's
+# fields as properties, arrays of scalars. Lichtblick's parser (mcap-support's
+# parseJsonSchema) takes exactly: boolean, string, number, integer, object with
+# properties, and arrays of those.
+
+def _field(kind: str, description: str) -> dict[str, Any]:
+    return {"type": kind, "description": description}
+
+
+def _vector(n: int, description: str) -> dict[str, Any]:
+    return {"type": "array", "items": {"type": "number"},
+            "description": f"{description} ({n} numbers)"}
+
+
+def _object(description: str, properties: Mapping[str, dict[str, Any]]) -> dict[str, Any]:
+    return {"type": "object", "description": description, "properties": dict(properties)}
+
+
+def _counters(cls: type, description: str) -> dict[str, Any]:
+    """The schema of a dataclass of counters and figures (its scalar fields; free-form
+    mappings such as ``rejected {reason: count}`` left out: no fixed properties)."""
+    import typing
+
+    kinds = {bool: "boolean", int: "integer", float: "number", str: "string"}
+    properties = {}
+    for name, hint in typing.get_type_hints(cls).items():
+        options = [a for a in typing.get_args(hint) if a is not type(None)] or [hint]
+        if len(options) == 1 and options[0] in kinds:
+            properties[name] = _field(kinds[options[0]], name.replace("_", " "))
+    return _object(description, properties)
+
+
+_ENVELOPE: dict[str, dict[str, Any]] = {
+    "schema": _field("integer", "telemetry schema version"),
+    "topic": _field("string", "the topic again"),
+    "seq": _field("integer", "publisher message counter"),
+    "t": _field("number", "the loop's monotonic time of the snapshot [s]"),
+    "time_unix": _field("number", "wall-clock time when sent [s since the epoch]"),
+}
+
+
+def state_json_schema(title: str = "groundstation.telemetry.state") -> dict[str, Any]:
+    """JSON Schema of a ``state`` message (units in the descriptions)."""
+    sticks = {k: _field("integer", f"{k} stick [RC units]")
+              for k in ("pitch", "roll", "yaw", "thrust")}
+    return {"title": title, **_object("telemetry topic 'state' (NED earth, FRD body, SI)", {
+        **_ENVELOPE,
+        "supervisor": _object("supervisor state", {
+            "state": _field("integer", "state number"),
+            "name": _field("string", "state name, e.g. TRACK")}),
+        "estimate": _object("the estimate (null before the estimator runs)", {
+            "position": _vector(3, "position NED [m]"),
+            "quaternion": _vector(4, "attitude body to NED, scalar first [w, x, y, z]"),
+            "velocity_body": _vector(3, "velocity FRD [m/s]"),
+            "omega": _vector(3, "body rates FRD [rad/s]"),
+            "gyro_bias": _vector(3, "gyro bias [rad/s]"),
+            "acc_bias": _vector(3, "accelerometer bias [m/s^2]")}),
+        "reference": _object("the reference tracked", {
+            "position": _vector(3, "position NED [m]"),
+            "velocity": _vector(3, "velocity NED [m/s]"),
+            "yaw": _field("number", "heading from north [rad]")}),
+        "error": _object("reference - estimate", {
+            "position": _vector(3, "NED [m]"),
+            "distance": _field("number", "[m]")}),
+        "command": _object("the COMMAND sent", {
+            **sticks, "mask": _field("integer", "ctrl-mask bits"),
+            "sent": _field("boolean", "sent this tick")}),
+        "vehicle": _object("what the vehicle last reported", {
+            "battery_v": _field("number", "battery [V]"),
+            "serial_active": _field("boolean", "it applies our commands"),
+            "motors_on": _field("boolean", "motors on"),
+            "rc_valid": _field("boolean", "the pilot's radio is received"),
+            "applied_mask": _field("integer", "channels it applies (ctrl-mask bits)"),
+            "pilot_enabled": _field("boolean", "the serial-enable switch")}),
+        "flight_time_s": _field("number", "since the flight loop started [s]"),
+        "final": _field("boolean", "the flight's last state message"),
+        "outcome": _field("string", "with final: COMPLETED, FAILSAFE or STOPPED"),
+        "reason": _field("string", "with final: why the flight ended"),
+    })}
+
+
+def health_json_schema(title: str = "groundstation.telemetry.health") -> dict[str, Any]:
+    """JSON Schema of a ``health`` message (units in the descriptions)."""
+    from groundstation.estimation.records import EkfHealth
+    from groundstation.telemetry.control import ControlStats
+    from groundstation.vicon.health import ViconHealth
+
+    return {"title": title, **_object("telemetry topic 'health'", {
+        **_ENVELOPE,
+        "link": _object("serial link", {
+            "rate_hz": _field("number", "DATA frames per second [Hz]"),
+            "time_since_data_s": _field("number", "since the last DATA frame [s]")}),
+        "vicon": _counters(ViconHealth, "Vicon input: rates [Hz], counters, times [s]"),
+        "estimator": _counters(EkfHealth, "estimator counters and consistency"),
+        "loop": _object("loop", {"ticks": _field("integer", "loop ticks"),
+                                 "commands": _field("integer", "COMMANDs sent")}),
+        "control": _counters(ControlStats, "the control socket's counters"),
+        "telemetry": _object("this publisher", {
+            k: _field("integer", f"messages {k}") for k in ("sent", "dropped", "errors")}),
+    })}
