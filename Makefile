@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install test lint typecheck pytest demo bench clean
+.PHONY: install test test-fast lint typecheck pytest demo bench clean
 
 install: $(STAMP)
 
@@ -21,10 +21,20 @@ lint: install
 typecheck: install
 	$(BIN)/mypy
 
+# Test workers (pytest-xdist). The real-time flights (marker `realtime`) are one xdist
+# group: one worker flies them one after another, mostly waiting on the wall clock, while
+# the others run the pure tests; so one worker more than the 2 cores of CI's machine.
+WORKERS ?= 3
+
 pytest: install
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q -n $(WORKERS) --dist loadgroup
 
 test: lint typecheck pytest
+
+# The edit-run loop: no real-time flight and no long simulation (under 90 s); `make test`
+# runs everything
+test-fast: install
+	$(BIN)/pytest -q -n $(WORKERS) --dist loadgroup -m "not realtime and not slow"
 
 # `make demo PROTOCOL=asctec-ll` flies the virtual AscTec LL vehicle instead of the X-3D
 PROTOCOL ?= x3d

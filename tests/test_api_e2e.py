@@ -95,6 +95,7 @@ def _tail(path: Path, lines: int = 30) -> str:
     return "\n".join(text.splitlines()[-lines:])
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 @pytest.mark.timeout(240)  # about 50 s on an idle 2-core machine; each process start is
 # seconds of imports, several times that on a loaded one

@@ -47,6 +47,7 @@ def _truth_at(truth: Any, t: float) -> np.ndarray:
     return np.asarray(truth["position"][max(0, min(k, len(times)) - 1)])
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_a_flight_driven_only_by_the_client(tmp_path: Path) -> None:
     cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {

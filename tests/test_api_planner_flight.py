@@ -34,7 +34,7 @@ from groundstation.loop.supervisor import Outcome, State
 from sim_device.realtime import SimDeviceProcess
 
 REPO = Path(__file__).resolve().parents[1]
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 FIGURE8 = {"name": "figure-eight", "period_s": 3000, "center": [0, 0, -1], "size_m": 0.2}
 """The hostile tester's trajectory, as they sent it."""

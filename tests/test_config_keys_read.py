@@ -126,6 +126,7 @@ def _motors(cfg: GroundStationConfig, tmp_path: Path) -> int:
                                      start=True, echo=lambda _line: None)
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_every_configuration_key_is_read(tmp_path: Path) -> None:
     base = apply_overrides(load_config(ROOT / "config" / "sim.yaml"), {

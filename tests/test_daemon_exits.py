@@ -108,6 +108,7 @@ class Truth:
         return k + int(np.argmax(self.mask[k:] == 0))
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_a_closed_terminal_lands_hands_back_and_logs_the_flight(tmp_path: Path) -> None:
     """A hostile tester's finding: SIGHUP in the air killed the daemon at once (no
@@ -193,6 +194,7 @@ with its flight log there, and copy the log out before the namespace (and the tm
 goes."""
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_a_disk_that_fills_in_the_air_is_an_incomplete_log_not_a_success(
         tmp_path: Path) -> None:

@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 import yaml
+from eval_flights import sharing_flights
 
 from groundstation.config import apply_overrides, dump_config, load_config, validate_config
 from groundstation.errors import ConfigError
@@ -139,10 +140,12 @@ def test_plant_row_gives_deviations_from_the_model() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("perturbed-flights")  # its flights are the targets' (seeds 1, 2)
 def test_a_short_perturbed_suite_reports_every_seed_and_the_worst(tmp_path: Path) -> None:
     names = ["takeoff-h135", "yaw-turn"]
-    report = run_eval(load_config(REPO / "config" / "sim.yaml"), fast=True, out_dir=tmp_path,
-                      scenarios=names, perturb=[1, 2])
+    with sharing_flights():
+        report = run_eval(load_config(REPO / "config" / "sim.yaml"), fast=True,
+                          out_dir=tmp_path, scenarios=names, perturb=[1, 2])
     assert list(report.plants) == [1, 2] and report.plants[2] == perturbation(2)
     data: dict[str, Any] = json.loads(report.metrics_json.read_text(encoding="utf-8"))
     assert data["perturbation"]["seeds"] == [1, 2]
@@ -171,6 +174,7 @@ def test_a_short_perturbed_suite_reports_every_seed_and_the_worst(tmp_path: Path
     assert not math.isnan(report.wall_s)
 
 
+@pytest.mark.xdist_group("perturbed-flights")  # its flight is the targets' (seed 3)
 def test_gs_eval_takes_perturb_seeds(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
@@ -181,8 +185,9 @@ def test_gs_eval_takes_perturb_seeds(tmp_path: Path) -> None:
     bad = runner.invoke(app, ["eval", "--config", config, "--fast", "--perturb", "2-x"])
     assert bad.exit_code == 2 and "--perturb '2-x'" in bad.output
     out = tmp_path / "eval"
-    res = runner.invoke(app, ["eval", "--config", config, "--fast", "--out", str(out),
-                              "--scenario", "hover-h90", "--perturb", "3"])
+    with sharing_flights():
+        res = runner.invoke(app, ["eval", "--config", config, "--fast", "--out", str(out),
+                                  "--scenario", "hover-h90", "--perturb", "3"])
     assert res.exit_code == 0, res.output
     data = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
     assert data["perturbation"]["seeds"] == [3]

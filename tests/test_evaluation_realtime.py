@@ -29,6 +29,7 @@ from sim_device.evaluation.scenarios import STEP_TIME_S, Scenario, scenario_conf
 REPO = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_real_time_hover_is_logged_aligned_and_reported(tmp_path: Path) -> None:
     base = apply_overrides(load_config(REPO / "config" / "sim.yaml"),

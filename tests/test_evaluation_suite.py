@@ -2,9 +2,10 @@
 to the figure reached.
 
 The Ch. 11 part of the suite (scenarios.THESIS; issue 13's flights are judged by their
-targets under --perturb, tests/test_evaluation_perturb.py flies a part of them) flies
-once (module fixture, about 30 s on 2 cores) in-process
-against the virtual lab with config/sim.yaml (seed 1, deterministic). Each metric
+targets under --perturb, tests/test_evaluation_targets.py) flies in-process against the
+virtual lab with config/sim.yaml (seed 1, deterministic), each flight once, when the
+first test that reads it asks for it (``FlownSuite``; the report test runs `gs eval` on
+the same flights). Each metric
 must stay within a stated margin of the figure this code reached (REACHED, printed
 by `.venv/bin/python benchmarks/bench_eval.py`):
 
@@ -21,11 +22,13 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from eval_flights import nominal, sharing_flights
 
 from groundstation.config import load_config
 from groundstation.evaluation.metrics import step_figures, track_clock
@@ -33,8 +36,11 @@ from groundstation.loop.supervisor import State
 from sim_device.evaluation import EvalReport, run_eval
 from sim_device.evaluation.runner import simulate_model
 from sim_device.evaluation.scenarios import STEP_TIME_S, THESIS, select
+from sim_device.evaluation.suite import ScenarioOutcome
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
+# one worker flies the module's flights, once; no test waits for more than the flights it
+# reads (the longest, a 120 s square, is about 15 s)
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("thesis-flights")]
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -80,11 +86,49 @@ LIMITS = {  # metric -> limit as a function of the reached figure
 }
 
 
+class _OnDemand(Mapping[str, Any]):
+    """Scenario name -> ``get(name)``, computed on first use and kept."""
+
+    def __init__(self, get: Callable[[str], Any]) -> None:
+        self._get = get
+        self._kept: dict[str, Any] = {}
+
+    def __getitem__(self, name: str) -> Any:
+        if name not in self._kept:
+            self._kept[name] = self._get(name)
+        return self._kept[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(THESIS)
+
+    def __len__(self) -> int:
+        return len(THESIS)
+
+
+class FlownSuite:
+    """The Ch. 11 flights of `gs eval --fast`, each flown (and scored as `gs eval` scores
+    it) when a test first asks for it: ``outcomes[name]``, ``metrics[name]``. A test pays
+    only for the flights it reads, and each is flown once in this module's worker."""
+
+    def __init__(self, workdir: Path) -> None:
+        self.outcomes: Mapping[str, ScenarioOutcome] = _OnDemand(
+            lambda name: nominal(name, workdir))
+        self.metrics: Mapping[str, dict[str, Any]] = _OnDemand(
+            lambda name: self.outcomes[name].metrics)
+
+
 @pytest.fixture(scope="module")
-def suite(tmp_path_factory: pytest.TempPathFactory) -> EvalReport:
-    out = tmp_path_factory.mktemp("eval")
-    return run_eval(load_config(REPO / "config" / "sim.yaml"), fast=True, out_dir=out,
-                    scenarios=THESIS)
+def suite(tmp_path_factory: pytest.TempPathFactory) -> FlownSuite:
+    return FlownSuite(tmp_path_factory.mktemp("eval-flights"))
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory: pytest.TempPathFactory) -> EvalReport:
+    """`gs eval --fast` over the Ch. 11 flights, report and figures written (the flights
+    are the ones the other tests flew)."""
+    with sharing_flights():
+        return run_eval(load_config(REPO / "config" / "sim.yaml"), fast=True,
+                        out_dir=tmp_path_factory.mktemp("eval"), scenarios=THESIS)
 
 
 def test_reached_table_covers_the_thesis_flights() -> None:
@@ -92,7 +136,7 @@ def test_reached_table_covers_the_thesis_flights() -> None:
 
 
 @pytest.mark.parametrize("name", list(REACHED))
-def test_metrics_stay_within_the_margin_of_the_figures_reached(suite: EvalReport,
+def test_metrics_stay_within_the_margin_of_the_figures_reached(suite: FlownSuite,
                                                                name: str) -> None:
     m = suite.metrics[name]
     for key, reached in REACHED[name].items():
@@ -101,7 +145,7 @@ def test_metrics_stay_within_the_margin_of_the_figures_reached(suite: EvalReport
         assert m["completed"] and m["final_state"] == "DONE", m
 
 
-def test_constant_velocity_lqr_has_the_least_lag_and_error(suite: EvalReport) -> None:
+def test_constant_velocity_lqr_has_the_least_lag_and_error(suite: FlownSuite) -> None:
     # Thesis Ch. 11.3/11.5: "the LQR with a constant velocity model clearly stands out being
     # able to match the position time correlated with the reference"; PID and the
     # constant-position LQR lag behind and cut the corners (Fig. 11.5-11.7).
@@ -118,7 +162,7 @@ def test_constant_velocity_lqr_has_the_least_lag_and_error(suite: EvalReport) ->
                                           rel=0.15)
 
 
-def test_1hz_vicon_hover_is_worse_and_10_and_100hz_are_similar(suite: EvalReport) -> None:
+def test_1hz_vicon_hover_is_worse_and_10_and_100hz_are_similar(suite: FlownSuite) -> None:
     # Thesis Ch. 11.1, Fig. 11.1-11.3: 1 Hz lets the estimate drift; 10 and 100 Hz both hold
     # the hover closely, so 10 Hz is enough.
     rms = {hz: suite.metrics[f"hover-{hz}hz"]["rms_m"] for hz in (1, 10, 100)}
@@ -128,7 +172,7 @@ def test_1hz_vicon_hover_is_worse_and_10_and_100hz_are_similar(suite: EvalReport
     assert rms[10] < 0.01 and rms[100] < 0.01 and abs(rms[10] - rms[100]) < 0.005
 
 
-def test_hinf_designed_without_the_rate_loop_does_not_hover(suite: EvalReport) -> None:
+def test_hinf_designed_without_the_rate_loop_does_not_hover(suite: FlownSuite) -> None:
     # Thesis Ch. 10.3: the H-infinity gain designed on the model without the on-board
     # dynamics "was not capable of stabilizing the quadrotor in hover"; designed with the
     # rate-loop lag (tests/test_control_closed_loop.py flies it on the model) it hovers.
@@ -141,7 +185,7 @@ def test_hinf_designed_without_the_rate_loop_does_not_hover(suite: EvalReport) -
     assert good["completed"] and good["rms_m"] < 0.015 and good["max_tilt_deg"] < 5.0
 
 
-def test_vicon_outage_holds_on_the_imu_and_resumes(suite: EvalReport) -> None:
+def test_vicon_outage_holds_on_the_imu_and_resumes(suite: FlownSuite) -> None:
     o = suite.outcomes["square-vicon-outage"]
     states = [tr.new for tr in o.record.transitions]
     assert states == [State.TAKEOFF, State.TRACK, State.HOLD, State.TRACK, State.LAND,
@@ -153,7 +197,7 @@ def test_vicon_outage_holds_on_the_imu_and_resumes(suite: EvalReport) -> None:
     assert o.metrics["rms_m"] < 1.1 * suite.metrics["square-lqr-cv"]["rms_m"]
 
 
-def test_thrust_error_leaves_no_height_offset(suite: EvalReport) -> None:
+def test_thrust_error_leaves_no_height_offset(suite: FlownSuite) -> None:
     # 10 % less lift: without correction the LQR would sag by 0.1 m g / (0.9 K_z), several cm
     # (tests/test_control_closed_loop.py); the disturbance observer removes it.
     r = suite.outcomes["hover-thrust-error"].record
@@ -165,7 +209,7 @@ def test_thrust_error_leaves_no_height_offset(suite: EvalReport) -> None:
     assert faulty["rms_m"] < 1.1 * nominal["rms_m"]
 
 
-def test_low_hover_stays_off_the_floor(suite: EvalReport) -> None:
+def test_low_hover_stays_off_the_floor(suite: FlownSuite) -> None:
     r = suite.outcomes["low-hover"].record
     track = r.during(State.TRACK)
     window = track & (track_clock(r.t, track) >= 2.0)
@@ -175,7 +219,7 @@ def test_low_hover_stays_off_the_floor(suite: EvalReport) -> None:
 
 
 @pytest.mark.parametrize("name", ["step-x", "step-y", "step-z"])
-def test_steps_agree_with_the_model_simulation(suite: EvalReport, name: str) -> None:
+def test_steps_agree_with_the_model_simulation(suite: FlownSuite, name: str) -> None:
     # Thesis Fig. 11.4 compares the flown step with a simulation on the model (true
     # state, no estimator, no motor lag). The responses are compared point by point
     # over the 6 s after the step (step-x reached 4 mm RMS on the 0.5 m step) and by their
@@ -199,7 +243,7 @@ def test_steps_agree_with_the_model_simulation(suite: EvalReport, name: str) -> 
     assert diff < 0.015, diff
 
 
-def test_truth_is_aligned_with_the_ticks_to_the_vicon_noise(suite: EvalReport) -> None:
+def test_truth_is_aligned_with_the_ticks_to_the_vicon_noise(suite: FlownSuite) -> None:
     # Vicon samples are the truth plus Table 6.1 noise at their measurement time. On the
     # square (0.15 m/s) a 9 ms misalignment of the truth would add 1.4 mm; reached: the
     # per-axis scatter equals the configured standard deviations to within 1 %.
@@ -213,18 +257,18 @@ def test_truth_is_aligned_with_the_ticks_to_the_vicon_noise(suite: EvalReport) -
     assert w.sum() > 1000 and scatter == pytest.approx(sigma, rel=0.1)
 
 
-def test_report_metrics_json_and_figures_are_written(suite: EvalReport) -> None:
-    text = suite.report_md.read_text(encoding="utf-8")
+def test_report_metrics_json_and_figures_are_written(report: EvalReport) -> None:
+    text = report.report_md.read_text(encoding="utf-8")
     for name in THESIS:
         assert f"| `{name}` |" in text
-    data: dict[str, Any] = json.loads(suite.metrics_json.read_text(encoding="utf-8"))
+    data: dict[str, Any] = json.loads(report.metrics_json.read_text(encoding="utf-8"))
     assert data["mode"] == "fast" and list(data["scenarios"]) == list(THESIS)
     assert data["perturbation"] is None and "seeds" not in data["scenarios"]["hover-10hz"]
     cv = data["scenarios"]["square-lqr-cv"]["metrics"]
-    assert cv["rms_m"] == pytest.approx(suite.metrics["square-lqr-cv"]["rms_m"])
+    assert cv["rms_m"] == pytest.approx(report.metrics["square-lqr-cv"]["rms_m"])
     assert data["scenarios"]["hover-10hz"]["metrics"]["lag_s"] is None  # NaN -> null
-    assert len(suite.figures) == 11
-    for png in suite.figures:
+    assert len(report.figures) == 11
+    for png in report.figures:
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
         assert f"]({png.name})" in text
-    assert not math.isnan(suite.wall_s)
+    assert not math.isnan(report.wall_s)

@@ -1,5 +1,8 @@
 """End to end in real time: `gs fly`'s daemon against the virtual lab over a real pty and UDP.
 
+Each flight serves every assertion it can: the first is also the exclusive port's flight
+(a second `gs fly` on the flying vehicle's port is refused without a byte on the wire).
+
 The virtual X-3D runs on a pseudo-terminal and the virtual Vicon sends real UDP
 datagrams on loopback; the daemon opens the pty with pyserial, binds the UDP port,
 records its flight log and publishes telemetry that a subscriber in the test reads.
@@ -18,6 +21,7 @@ from lab_helpers import free_udp_port
 
 from groundstation.config import apply_overrides, dump_config, load_config
 from groundstation.loop.daemon import FlightDaemon, FlightSummary
+from groundstation.loop.flight import fly_command
 from groundstation.loop.recorder import read_flight
 from groundstation.loop.supervisor import State
 from groundstation.telemetry.client import TelemetryClient
@@ -27,6 +31,7 @@ from sim_device.realtime import SimDeviceProcess
 REPO = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {
@@ -58,8 +63,17 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
                 if {"state", "health"} <= topics.keys() and \
                         topics["state"]["supervisor"]["name"] == "TRACK":  # type: ignore[index]
                     break
-            # While tracking, hand yaw to the pilot and back over the control socket
-            # (what `gs channels` does).
+            # While tracking, a second `gs fly` on this vehicle's port, as a mistaken
+            # operator starts it (the same configuration): refused before it sends a
+            # byte (it used to fail on the Vicon bind and send ctrl mask 0 on its way out:
+            # 6 ms with the pilot). The vehicle stamps every frame that reaches it.
+            echoed: list[str] = []
+            t_second = time.monotonic()
+            second = fly_command(cfg, echo=echoed.append)
+            t_second_end = time.monotonic()
+            time.sleep(0.2)  # the wire window below ends before the handover
+            # Then hand yaw to the pilot and back over the control socket (what
+            # `gs channels` does).
             assert daemon.control_endpoint is not None
             handed = send_request(daemon.control_endpoint,
                                   {"request": "channels", "auto": ["pitch", "roll", "thrust"]})
@@ -79,6 +93,13 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
         # the truth log shows the final COMMAND (ctrl mask 0) applied.
         time.sleep(0.3)
     summary = out["s"]
+    assert second == 3, echoed  # could not start
+    assert any("in use" in line for line in echoed), echoed
+    wire = device.wire
+    assert wire is not None
+    during = (wire.command_in >= t_second) & (wire.command_in <= t_second_end + 0.05)
+    assert during.any() and np.all(wire.command_mask[during] == 0xF)  # only the first's
+    assert len(wire.config_in) == 1 and wire.config_in[0] < t_second  # the first's, at its start
     assert {"state", "health"} <= topics.keys()
     assert handed == {"ok": True, "auto": ["pitch", "roll", "thrust"], "state": "TRACK"}
     assert back == {"ok": True, "auto": ["pitch", "roll", "yaw", "thrust"], "state": "TRACK"}
@@ -149,6 +170,7 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     assert rows["cmd_mask"][np.flatnonzero(yaw_manual)[-1] + 1 + sent_after[0]] == 0xF
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_demo_keeps_the_truth_with_the_log_and_reports_against_it(tmp_path: Path) -> None:
     """`gs fly --demo` (what `make demo` runs): the lab's truth ends up inside the flight's
@@ -180,6 +202,7 @@ def test_demo_keeps_the_truth_with_the_log_and_reports_against_it(tmp_path: Path
     assert metrics["truth_file"] == str(log / "truth.npz")
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_real_time_flight_in_the_asctec_ll_dialect(tmp_path: Path) -> None:
     """`gs fly --protocol asctec-ll`'s daemon against the virtual LL vehicle over a pty:
@@ -216,6 +239,7 @@ def test_real_time_flight_in_the_asctec_ll_dialect(tmp_path: Path) -> None:
     assert truth["on_ground"][-1] and truth["ctrl_mask"][-1] == 0
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_an_ll_vehicle_that_stops_answering_polls_is_link_loss(tmp_path: Path) -> None:
     """The virtual LL vehicle stops answering polls in the air (its commands still reach

@@ -3,7 +3,9 @@
 Real-time flights of the daemon against the virtual lab over a real pty and UDP, each
 reproducing one of the hostile tester's findings and asserting that the flight goes
 on, or ends as documented (`gs fly --help`: exit 0 mission completed and landed, 1
-failsafe or abort, 3 could not start, 4 stopped on request).
+failsafe or abort, 3 could not start, 4 stopped on request). Finding 7 (a second `gs fly`
+on a flying vehicle's port) is asserted on the flight of tests/test_flight_e2e.py's
+``test_real_time_flight_over_pty_and_udp``, which it shares.
 
 The assertions are about what happened, never about how fast the machine is: a
 COMMAND gap is compared with the vehicle's 100 ms watchdog (the nominal gap is 20 ms),
@@ -33,14 +35,14 @@ from lab_helpers import free_udp_port
 from structlog.testing import capture_logs
 
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.loop.daemon import FlightDaemon, FlightSummary
+from groundstation.loop.daemon import FlightDaemon
 from groundstation.loop.flight import fly_command
 from groundstation.loop.recorder import read_flight
 from groundstation.loop.supervisor import State
 from sim_device.realtime import SimDeviceProcess, SimDeviceThread
 
 REPO = Path(__file__).resolve().parents[1]
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 
 def lab_config(tmp_path: Path, **overrides: object) -> GroundStationConfig:
@@ -230,47 +232,6 @@ def test_two_sigterms(tmp_path: Path, apart_s: float, landed: bool) -> None:
     else:
         assert "LAND -> HANDBACK: stop requested twice" in out, out
     assert "stopped on request" in out
-
-
-def track_started(daemon: FlightDaemon) -> bool:
-    return daemon.core.state is State.TRACK
-
-
-def fly_in_thread(daemon: FlightDaemon) -> tuple[threading.Thread, dict[str, FlightSummary]]:
-    out: dict[str, FlightSummary] = {}
-    thread = threading.Thread(target=lambda: out.setdefault("summary", daemon.run()))
-    thread.start()
-    return thread, out
-
-
-def test_a_second_daemon_on_a_flying_vehicles_port_is_refused_and_writes_nothing(
-        tmp_path: Path) -> None:
-    """Finding 7: a second `gs fly` on the port of a vehicle in the air failed on the
-    Vicon bind and, on its way out, sent ctrl mask 0: 6 ms with the pilot. The vehicle
-    runs in its own process and stamps every frame that reaches it."""
-    with vehicle_process(tmp_path) as (vehicle, cfg):
-        first = FlightDaemon(cfg, duration_s=6.0)
-        thread, out = fly_in_thread(first)
-        try:
-            wait_until(lambda: track_started(first), 30.0, "TRACK")
-            echoed: list[str] = []
-            t0 = time.monotonic()
-            code = fly_command(cfg, echo=echoed.append)  # the same configuration
-            t1 = time.monotonic()
-        finally:
-            thread.join(60.0)
-        time.sleep(0.2)  # the final COMMAND reaches the vehicle
-    assert code == 3, echoed  # could not start
-    assert any("in use" in line for line in echoed), echoed
-    summary = out["summary"]
-    # the first flight went on to land (a watchdog event, if a loaded machine stalled
-    # it, would be the machine's: the second process wrote nothing, asserted below)
-    assert summary.final_state is State.DONE, (summary.transitions, summary.events)
-    wire = vehicle.wire
-    assert wire is not None
-    during = (wire.command_in >= t0) & (wire.command_in <= t1 + 0.05)
-    assert during.any() and np.all(wire.command_mask[during] == 0xF)  # only the first's
-    assert len(wire.config_in) == 1 and wire.config_in[0] < t0  # the first's, at its start
 
 
 def test_a_failsafe_landing_exits_1_with_a_warning(tmp_path: Path) -> None:

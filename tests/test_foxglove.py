@@ -366,6 +366,7 @@ def _read_line(stream: Any, timeout: float) -> str:
     return str(stream.readline().decode())
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_foxglove_client_sees_the_flight(tmp_path: Path) -> None:
     pytest.importorskip("foxglove")
