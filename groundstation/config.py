@@ -1319,7 +1319,9 @@ def _check_keys(root: yaml.Node, source: str) -> dict[str, int]:
                         raise ConfigError(f"{source}:{line}: {here}: {reason}",
                                           [(here, name, reason)])
                     first[name] = line
+                lines.setdefault(here, line)
                 stack.append((value, here))
+    return lines
 
 
 def _parse_yaml(raw: bytes, source: str) -> tuple[Any, dict[str, int]]:
@@ -1356,9 +1358,7 @@ def _parse_yaml(raw: bytes, source: str) -> tuple[Any, dict[str, int]]:
     except RecursionError:
         raise ConfigError(f"{source}: not valid YAML: nested too deeply") from None
     finally:
-                lines.setdefault(here, line)
         loader.dispose()
-    return lines
 
 
 def _line_column(before: str) -> str:
@@ -1380,6 +1380,12 @@ def _problems(exc: ValidationError) -> list[tuple[str, object, str]]:
         loc = tuple(err["loc"])
         reason = err["msg"].removeprefix("Value error, ")
         value = err.get("input")
+        cause = (err.get("ctx") or {}).get("error")
+        if isinstance(cause, FieldValueError):  # the value as the file wrote it
+            loc = (*loc, cause.field)
+            value = value.get(cause.field, cause.value) if isinstance(value, dict) \
+                else cause.value
+        path = ".".join(str(p) for p in loc) or "<root>"
         if err["type"] == "extra_forbidden":
             reason = "unknown key"
         elif err["type"] == "missing":
@@ -1434,12 +1440,6 @@ def validate_config(data: dict[str, Any], source: str = "<config>",
         config = GroundStationConfig.model_validate(sections)
     except ValidationError as exc:
         problems += _problems(exc)
-        cause = (err.get("ctx") or {}).get("error")
-        if isinstance(cause, FieldValueError):  # the value as the file wrote it
-            loc = (*loc, cause.field)
-            value = value.get(cause.field, cause.value) if isinstance(value, dict) \
-                else cause.value
-        path = ".".join(str(p) for p in loc) or "<root>"
     sim = _lab_section(data.get("sim"), problems)
     if problems or config is None:
         _raise(problems, source, lines)
