@@ -92,6 +92,52 @@ class SimViconConfig(ConfigModel):
     volume_z: LabBounds = (-2.0, 0.05)  # Table B.1: 0..2 m height, NED
 
 
+WindSpeed = Annotated[float, within(
+    -20.0, 20.0, "m/s: 20 m/s is a gale; no motion-capture lab flies in one")]
+GustTime = Annotated[float, within(
+    0.0, 60.0, "s: a gust longer than a minute is a wind, not a gust", lo_open=True)]
+MassFactor = Annotated[float, within(
+    0.2, 5.0, "true mass after / before: five times is another vehicle, not a payload")]
+
+
+class SimWindConfig(ConfigModel):
+    """Air that moves, and the drag the vehicle feels on its airspeed (its velocity less the
+    wind's). RotorPy's aerodynamics (``rotorpy/vehicles/multirotor.py``: rotor drag linear
+    in the airspeed and in the rotor speed, parasitic drag quadratic) with the thesis's
+    induced inflow (eq. 3.9) as the rotors' drag along body z."""
+
+    velocity_m_s: list[WindSpeed] = Field(default_factory=lambda: [0.0, 0.0, 0.0],
+                                          min_length=3, max_length=3)
+    # steady wind, NED [m/s] (3 m/s north: [3, 0, 0])
+    gusts: list[tuple[SimTime, GustTime, WindSpeed, WindSpeed, WindSpeed]] = Field(
+        default_factory=list)
+    # (start_s, duration_s, north, east, down [m/s]): a 1-cosine gust on top of the steady
+    # wind, peaking at (north, east, down) halfway (the discrete gust of MIL-HDBK-1797)
+    rotor_drag_n_s_m: Annotated[float, within(
+        0.0, 10.0, "N s/m: ten times the eq. C.8 inflow would stop the vehicle in the air")] \
+        = 0.217
+    # in-plane rotor drag at the hover rotor speed [N s/m]: RotorPy's AscTec Hummingbird
+    # ratio k_d / k_z = 1.19e-4 / 2.32e-4 times the thesis's induced inflow 0.423 (eq. C.8);
+    # it scales with the rotor speed, sqrt(lift / weight)
+    body_drag_n_s2_m2: list[Annotated[float, within(
+        0.0, 1.0, "N s^2/m^2: 1 is a 1.6 m^2 flat plate, a sail, not a frame")]] = Field(
+        default_factory=lambda: [0.005, 0.005, 0.01], min_length=3, max_length=3)
+    # parasitic drag of the frame along body x, y, z [N s^2/m^2] (RotorPy's Hummingbird
+    # c_Dx, c_Dy, c_Dz)
+
+
+class SimGroundEffectConfig(ConfigModel):
+    """More lift near the floor (Cheeseman and Bennett 1955: T / T_inf = 1 / (1 - (R / 4h)^2)
+    for a rotor of radius R at height h, held at its value for h = R / 2 below that)."""
+
+    rotor_radius_m: Annotated[float, within(
+        0.0, 1.0, "m: a rotor over a metre is no miniature quadrotor's", lo_open=True)] = 0.10
+    # the X-3D class's 8-inch rotors (RotorPy's Hummingbird: rotor_radius 0.10 m)
+    rotor_height_m: Annotated[float, within(
+        0.0, 1.0, "m: the rotor plane's height above the floor when standing")] = 0.08
+    # rotor plane above the floor when the vehicle stands (skids and arms), estimated
+
+
 class SimConfig(ConfigModel):
     """The virtual lab's ``sim:`` section: plant, sensors, link and Vicon."""
 
@@ -126,6 +172,14 @@ class SimConfig(ConfigModel):
     battery_droop_time_s: Annotated[float, within(
         0.0, DAY_S, "s: a simulated flight lasts less than a day", lo_open=True)] = 300.0
     thrust_scale: TrueOverModel = 1.0  # true lift / polynomial lift; 0.9 = 10 % thrust error
+    payload_steps: list[tuple[SimTime, MassFactor]] = Field(default_factory=list)
+    # (time_s, factor): from time_s on the true mass is factor x what it was (1.2: a payload
+    # of 20 % picked up; 1 / 1.2 drops it)
+    wind: SimWindConfig | None = None
+    # null: still air and no drag (the thesis's model, eq. 3.19-3.22); a section: the plant
+    # feels rotor and body drag on its airspeed, in the wind it describes (still by default)
+    ground_effect: SimGroundEffectConfig | None = None
+    # null: no ground effect (the thesis's model); a section: more lift near the floor
     gyro_bias: list[Annotated[float, within(
         -1.0, 1.0, "rad/s: a MEMS gyro's zero-rate offset is a few deg/s; 1 rad/s is 57")]] \
         = Field(default_factory=lambda: [0.01, -0.02, 0.005], min_length=3, max_length=3)

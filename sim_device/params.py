@@ -33,7 +33,7 @@ from groundstation.model.sensors import (
     VICON_POSITION_VARIANCE_TABLE_6_1,
     VICON_QUATERNION_VARIANCE_TABLE_6_1,
 )
-from sim_device.config import SimConfig
+from sim_device.config import SimConfig, SimGroundEffectConfig, SimWindConfig
 
 if TYPE_CHECKING:
     from groundstation.config import GroundStationConfig
@@ -68,6 +68,11 @@ def _tuple3(values: list[float]) -> tuple[float, float, float]:
 
 
 _GYRO_BIAS, _ACC_BIAS = _tuple3(_SIM.gyro_bias), _tuple3(_SIM.acc_bias)
+_SIM_WIND = SimWindConfig()
+"""The ``sim.wind`` section's defaults (drag coefficients)."""
+_WIND, _BODY_DRAG = _tuple3(_SIM_WIND.velocity_m_s), _tuple3(_SIM_WIND.body_drag_n_s2_m2)
+_SIM_GROUND = SimGroundEffectConfig()
+"""The ``sim.ground_effect`` section's defaults."""
 
 
 def _require(ok: bool, name: str, value: object, reason: str) -> None:
@@ -78,6 +83,71 @@ def _require(ok: bool, name: str, value: object, reason: str) -> None:
 
 def _finite(*values: float) -> bool:
     return all(math.isfinite(v) for v in values)
+
+
+@dataclass(frozen=True, slots=True)
+class WindParams:
+    """Moving air and the drag the plant feels on its airspeed (``sim.wind``).
+
+    velocity : steady wind, NED [m/s]
+    gusts : ``(start [s], duration [s], peak (3,) NED [m/s])`` 1-cosine gusts on top:
+        ``peak (1 - cos(2 pi (t - start) / duration)) / 2`` while they last
+    rotor_drag : in-plane rotor drag at the nominal vehicle's hover rotor speed [N s/m]
+        (RotorPy's ``k_d`` summed over the rotors); it scales with the rotor speed,
+        ``sqrt(|lift| / (m g))``. Along body z the rotors' drag is the thesis's induced
+        inflow ``I_i v_3`` (eq. 3.9), on the airspeed.
+    body_drag : parasitic drag of the frame along body x, y, z [N s^2/m^2] (RotorPy's
+        ``c_D``): ``-c_D,i |v_air| v_air,i``
+    """
+
+    velocity: Vec3 = _WIND
+    gusts: tuple[tuple[float, float, Vec3], ...] = ()
+    rotor_drag: float = _SIM_WIND.rotor_drag_n_s_m
+    body_drag: Vec3 = _BODY_DRAG
+
+    def __post_init__(self) -> None:
+        _require(len(self.velocity) == 3 and _finite(*self.velocity), "wind.velocity",
+                 self.velocity, "three finite speeds [m/s]")
+        _require(all(len(g) == 3 and _finite(g[0], g[1], *g[2]) and g[1] > 0
+                     for g in self.gusts), "wind.gusts", self.gusts,
+                 "(start, duration > 0, (north, east, down)) triples")
+        _require(self.rotor_drag >= 0 and len(self.body_drag) == 3
+                 and all(c >= 0 for c in self.body_drag), "wind.drag",
+                 (self.rotor_drag, self.body_drag), "drag coefficients >= 0")
+
+    def at(self, t: float) -> Vec3:
+        """The wind at time ``t`` [s], NED [m/s]."""
+        wn, we, wd = self.velocity
+        for start, duration, (gn, ge, gd) in self.gusts:
+            if start <= t <= start + duration:
+                k = 0.5 * (1.0 - math.cos(math.tau * (t - start) / duration))
+                wn, we, wd = wn + k * gn, we + k * ge, wd + k * gd
+        return wn, we, wd
+
+
+@dataclass(frozen=True, slots=True)
+class GroundEffectParams:
+    """More lift near the floor (``sim.ground_effect``): Cheeseman and Bennett's
+    ``T / T_inf = 1 / (1 - (R / 4 h)^2)`` for rotors of radius ``R`` at height ``h`` above
+    the floor, ``h = rotor_height - z`` (z NED, 0 on the floor), floored at ``R / 2``
+    where the formula stops holding (its value there, 4/3, is kept below it).
+
+    rotor_radius : R [m]; rotor_height : the rotor plane above the floor when the vehicle
+        stands [m]
+    """
+
+    rotor_radius: float = _SIM_GROUND.rotor_radius_m
+    rotor_height: float = _SIM_GROUND.rotor_height_m
+
+    def __post_init__(self) -> None:
+        _require(self.rotor_radius > 0 and self.rotor_height >= 0, "ground_effect",
+                 (self.rotor_radius, self.rotor_height), "radius > 0, height >= 0")
+
+    def factor(self, z: float) -> float:
+        """Lift in ground effect / lift out of it at NED height ``z`` [m] (z <= 0)."""
+        h = max(self.rotor_height - z, 0.5 * self.rotor_radius)
+        r = self.rotor_radius / (4.0 * h)
+        return 1.0 / (1.0 - r * r)
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,6 +173,11 @@ class PlantParams:
         and foam feet of a small quadrotor; thesis silent.
     thrust_faults : ``(start [s], duration [s], lift_scale)`` windows in which the rotors
         give ``lift_scale`` times their lift (fault injection; none by default)
+    payload_steps : ``(time [s], factor)``: from ``time`` on the mass is ``factor`` times
+        what it was (a payload picked up or dropped; none by default)
+    wind : moving air and drag on the airspeed (:class:`WindParams`); None: still air and
+        no drag, the thesis's model
+    ground_effect : more lift near the floor (:class:`GroundEffectParams`); None: none
     """
 
     mass: float = _VEHICLE.mass
@@ -119,6 +194,9 @@ class PlantParams:
     initial_yaw: float = 0.0
     impact_time: float = 0.05
     thrust_faults: tuple[tuple[float, float, float], ...] = ()
+    payload_steps: tuple[tuple[float, float], ...] = ()
+    wind: WindParams | None = None
+    ground_effect: GroundEffectParams | None = None
 
     def __post_init__(self) -> None:
         _require(self.mass > 0 and self.g > 0, "plant.mass/g", (self.mass, self.g), "must be > 0")
@@ -136,6 +214,8 @@ class PlantParams:
         _require(all(len(f) == 3 and _finite(*f) and f[1] >= 0 and f[2] >= 0
                      for f in self.thrust_faults), "plant.thrust_faults", self.thrust_faults,
                  "(start, duration >= 0, lift scale >= 0) triples")
+        _require(all(len(p) == 2 and _finite(*p) and p[1] > 0 for p in self.payload_steps),
+                 "plant.payload_steps", self.payload_steps, "(time, mass factor > 0) pairs")
         _require(len(self.initial_position) == 3 and self.initial_position[2] <= 0,
                  "plant.initial_position", self.initial_position, "NED, z <= 0 (floor at 0)")
 
@@ -399,6 +479,14 @@ def _plant_params(config: GroundStationConfig, sim: SimConfig) -> PlantParams:
         initial_yaw=math.radians(sim.initial_yaw_deg),
         thrust_faults=tuple((float(a), float(b), float(c))
                             for a, b, c in sim.faults.thrust_faults),
+        payload_steps=tuple((float(t), float(f)) for t, f in sim.payload_steps),
+        wind=None if sim.wind is None else WindParams(
+            velocity=_vec3(sim.wind.velocity_m_s),
+            gusts=tuple((float(g[0]), float(g[1]), _vec3(g[2:5])) for g in sim.wind.gusts),
+            rotor_drag=sim.wind.rotor_drag_n_s_m, body_drag=_vec3(sim.wind.body_drag_n_s2_m2)),
+        ground_effect=None if sim.ground_effect is None else GroundEffectParams(
+            rotor_radius=sim.ground_effect.rotor_radius_m,
+            rotor_height=sim.ground_effect.rotor_height_m),
     )
 
 

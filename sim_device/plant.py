@@ -20,6 +20,20 @@ with ``b(t) = 1 - droop * t / droop_time`` the battery factor (Ch. 5.2). The
 induced inflow ``I_i v_3`` (eq. 3.9) is a rotor effect: it acts while the motors
 turn (thrust stick > 0); with the motors stopped the vehicle falls freely.
 
+What a lab throws at the vehicle, each off by default (the thesis's model):
+
+* payload steps: ``m`` jumps by a factor at given times (``PlantParams.payload_steps``);
+* wind and drag (``PlantParams.wind``): with ``v_a = v - bCe w(t)`` the airspeed in body
+  axes, the rotors' drag ``-k_r s [v_a1, v_a2, 0]`` (``s = sqrt(|b lift| / (m0 g))`` the
+  rotor speed over the nominal vehicle's hover speed, RotorPy's rotor drag summed over the
+  rotors) with the inflow on the airspeed ``I_i v_a3`` along body z, and the frame's
+  parasitic drag ``-c_D,i |v_a| v_a,i`` (RotorPy); with the wind at rest it is the drag
+  of the vehicle's own motion;
+* ground effect (``PlantParams.ground_effect``): the lift times Cheeseman and Bennett's
+  ``1 / (1 - (R / 4 h)^2)`` at the rotors' height ``h`` above the floor.
+
+The accelerometer (:meth:`Plant.specific_force`) feels all of them: they are forces.
+
 Integration: the two lags are first-order linear with the set point held over a
 step, so they are advanced exactly (``x += (sp - x)(1 - exp(-dt/tau))``) and
 evaluated in closed form at the RK4 stage times; ``P, q, v`` take one classical
@@ -53,15 +67,20 @@ class Plant:
         "_a_lift_half",
         "_a_rate",
         "_a_rate_half",
+        "_aero",
         "_droop_rate",
         "_faults",
+        "_ground",
         "_impact",
         "_impact_until",
         "_inflow",
+        "_payload",
         "_thrust_map",
+        "_weight_nominal",
         "dt",
         "lift",
         "lift_sp",
+        "mass",
         "on_ground",
         "params",
         "px",
@@ -108,6 +127,11 @@ class Plant:
         self._impact = (0.0, 0.0, 0.0)  # touchdown deceleration felt by the IMU, FRD
         self._impact_until = -math.inf
         self._faults: list[tuple[float, float, float]] = list(params.thrust_faults)
+        self.mass = params.mass  # the true mass now [kg]: payload steps change it
+        self._payload = sorted(params.payload_steps)
+        self._aero = params.wind
+        self._ground = params.ground_effect
+        self._weight_nominal = params.mass * params.g
 
     def add_thrust_fault(self, start: float, duration: float, lift_scale: float) -> None:
         """From ``start`` [s] for ``duration`` [s] the rotors give ``lift_scale`` times the
@@ -145,6 +169,25 @@ class Plant:
         """Fraction of nominal lift the battery delivers at time ``t`` [s] (default now)."""
         return max(0.5, 1.0 - self._droop_rate * (self.t if t is None else t))
 
+    def lift_factor(self) -> float:
+        """The rotors' lift now over the polynomial's: the battery and the ground effect
+        (thrust faults act on the dynamics only, see :meth:`specific_force`)."""
+        ground = self._ground
+        return self.battery_factor() * (1.0 if ground is None else ground.factor(self.pz))
+
+    def mass_at(self, t: float) -> float:
+        """The true mass at time ``t`` [s] [kg]: the vehicle's times every payload step's
+        factor whose time has come."""
+        m = self.params.mass
+        for when, factor in self._payload:
+            if when <= t:
+                m *= factor
+        return m
+
+    def wind_at(self, t: float) -> tuple[float, float, float]:
+        """The wind at ``t`` [s], NED [m/s]; still air without ``PlantParams.wind``."""
+        return (0.0, 0.0, 0.0) if self._aero is None else self._aero.at(t)
+
     # ------------------------------------------------------------------ stepping
     def run(self, steps: int) -> None:
         """Advance ``steps`` fixed steps of ``dt``."""
@@ -158,10 +201,14 @@ class Plant:
         batt = max(0.5, 1.0 - self._droop_rate * (self.t + 0.5 * dt))
         if self._faults:
             batt *= self.fault_factor(self.t + 0.5 * dt)
+        if self._ground is not None:
+            batt *= self._ground.factor(self.pz)
+        if self._payload:
+            self.mass = self.mass_at(self.t + 0.5 * dt)
         l0 = self.lift
         l_sp = self.lift_sp
         if self.on_ground:
-            if batt * l0 + p.mass * p.g >= 0.0:  # lift does not exceed the weight: stay
+            if batt * l0 + self.mass * p.g >= 0.0:  # lift does not exceed the weight: stay
                 self.lift = l0 + (l_sp - l0) * self._a_lift
                 self.t += dt
                 return
@@ -175,7 +222,10 @@ class Plant:
               w0[2] + (sp[2] - w0[2]) * af)
         lh = l0 + (l_sp - l0) * self._a_lift_half
         l1 = l0 + (l_sp - l0) * self._a_lift
-        self._rk4(dt, w0, wh, w1, batt * l0, batt * lh, batt * l1)
+        if self._aero is None:
+            self._rk4(dt, w0, wh, w1, batt * l0, batt * lh, batt * l1)
+        else:
+            self._rk4_aero(dt, w0, wh, w1, batt * l0, batt * lh, batt * l1)
         self.wx, self.wy, self.wz = w1
         self.lift = l1
         self.t += dt
@@ -189,7 +239,7 @@ class Plant:
         Unrolled scalar stages: the position does not feed back, so a stage state is (q, v).
         """
         g = self.params.g
-        inv_m = 1.0 / self.params.mass
+        inv_m = 1.0 / self.mass
         c = self._inflow * inv_m
         q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
         vx, vy, vz = self.vx, self.vy, self.vz
@@ -201,6 +251,45 @@ class Plant:
                         vx + h * b[7], vy + h * b[8], vz + h * b[9], *wh, fh * inv_m, c, g)
         e = _derivative(q0 + dt * d[3], q1 + dt * d[4], q2 + dt * d[5], q3 + dt * d[6],
                         vx + dt * d[7], vy + dt * d[8], vz + dt * d[9], *w1, f1 * inv_m, c, g)
+        self._apply_rk4(dt, a, b, d, e)
+
+    def _rk4_aero(self, dt: float, w0: tuple[float, float, float],
+                  wh: tuple[float, float, float], w1: tuple[float, float, float],
+                  f0: float, fh: float, f1: float) -> None:
+        """:meth:`_rk4` with the wind and drag of ``PlantParams.wind`` (see the module doc);
+        the wind is taken at each stage's time, the rotor speed from each stage's lift."""
+        aero = self._aero
+        assert aero is not None
+        g = self.params.g
+        inv_m = 1.0 / self.mass
+        c = self._inflow * inv_m
+        rotor = aero.rotor_drag * inv_m if self._inflow != 0.0 else 0.0
+        cx, cy, cz = (k * inv_m for k in aero.body_drag)
+        inv_w = 1.0 / self._weight_nominal
+        k0, kh, k1 = (rotor * math.sqrt(abs(f) * inv_w) for f in (f0, fh, f1))
+        t = self.t
+        wind0, windh, wind1 = aero.at(t), aero.at(t + 0.5 * dt), aero.at(t + dt)
+        q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
+        vx, vy, vz = self.vx, self.vy, self.vz
+        h = 0.5 * dt
+        a = _derivative_aero(q0, q1, q2, q3, vx, vy, vz, *w0, f0 * inv_m, c, g, *wind0, k0,
+                             cx, cy, cz)
+        b = _derivative_aero(q0 + h * a[3], q1 + h * a[4], q2 + h * a[5], q3 + h * a[6],
+                             vx + h * a[7], vy + h * a[8], vz + h * a[9], *wh, fh * inv_m, c,
+                             g, *windh, kh, cx, cy, cz)
+        d = _derivative_aero(q0 + h * b[3], q1 + h * b[4], q2 + h * b[5], q3 + h * b[6],
+                             vx + h * b[7], vy + h * b[8], vz + h * b[9], *wh, fh * inv_m, c,
+                             g, *windh, kh, cx, cy, cz)
+        e = _derivative_aero(q0 + dt * d[3], q1 + dt * d[4], q2 + dt * d[5], q3 + dt * d[6],
+                             vx + dt * d[7], vy + dt * d[8], vz + dt * d[9], *w1, f1 * inv_m,
+                             c, g, *wind1, k1, cx, cy, cz)
+        self._apply_rk4(dt, a, b, d, e)
+
+    def _apply_rk4(self, dt: float, a: tuple[float, ...], b: tuple[float, ...],
+                   d: tuple[float, ...], e: tuple[float, ...]) -> None:
+        """Combine the four RK4 stages into the new (P, q, v); renormalise q."""
+        q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
+        vx, vy, vz = self.vx, self.vy, self.vz
         s = dt / 6.0
         self.px += s * (a[0] + 2.0 * (b[0] + d[0]) + e[0])
         self.py += s * (a[1] + 2.0 * (b[1] + d[1]) + e[1])
@@ -241,8 +330,10 @@ class Plant:
     def specific_force(self) -> tuple[float, float, float]:
         """What an ideal accelerometer reads, FRD [m/s^2]: non-gravitational force / m.
 
-        In flight ``(0, 0, (b * lift + I_i v_3)/m)``; resting on the floor the contact
-        force cancels gravity, so ``-bCe [0, 0, g]`` = (0, 0, -g) when level.
+        In flight ``(0, 0, (b * lift + I_i v_3)/m)`` (``b`` the battery and the ground
+        effect; with ``PlantParams.wind`` the drag too, see the module doc; a thrust fault
+        is not felt, as before); resting on the floor the contact force cancels gravity,
+        so ``-bCe [0, 0, g]`` = (0, 0, -g) when level.
         """
         p = self.params
         q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
@@ -255,7 +346,30 @@ class Plant:
                 ix, iy, iz = self._impact
                 return fx + ix, fy + iy, fz + iz
             return fx, fy, fz
-        return (0.0, 0.0, (self.battery_factor() * self.lift + self._inflow * self.vz) / p.mass)
+        lift = self.lift_factor() * self.lift
+        if self._aero is None:
+            return (0.0, 0.0, (lift + self._inflow * self.vz) / self.mass)
+        ax, ay, az = self.air_velocity_body()
+        rotor = (self._aero.rotor_drag * math.sqrt(abs(lift) / self._weight_nominal)
+                 if self._inflow != 0.0 else 0.0)
+        cx, cy, cz = self._aero.body_drag
+        speed = math.sqrt(ax * ax + ay * ay + az * az)
+        return (-(rotor + cx * speed) * ax / self.mass, -(rotor + cy * speed) * ay / self.mass,
+                (lift + self._inflow * az - cz * speed * az) / self.mass)
+
+    def air_velocity_body(self) -> tuple[float, float, float]:
+        """The airspeed in body FRD axes [m/s]: the velocity less the wind (bCe w)."""
+        wn, we, wd = self.wind_at(self.t)
+        q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
+        return (
+            self.vx - ((q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) * wn
+                       + 2.0 * (q1 * q2 + q0 * q3) * we + 2.0 * (q1 * q3 - q0 * q2) * wd),
+            self.vy - (2.0 * (q1 * q2 - q0 * q3) * wn
+                       + (q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3) * we
+                       + 2.0 * (q2 * q3 + q0 * q1) * wd),
+            self.vz - (2.0 * (q1 * q3 + q0 * q2) * wn + 2.0 * (q2 * q3 - q0 * q1) * we
+                       + (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) * wd),
+        )
 
     def velocity_ned(self) -> tuple[float, float, float]:
         """Velocity relative to earth in NED axes [m/s] (eCb v)."""
@@ -293,6 +407,36 @@ def _derivative(q0: float, q1: float, q2: float, q3: float, vx: float, vy: float
         g * r20 - (wy * vz - wz * vy),
         g * r21 - (wz * vx - wx * vz),
         g * r22 + lift_m + inflow_m * vz - (wx * vy - wy * vx),
+    )
+
+
+def _derivative_aero(q0: float, q1: float, q2: float, q3: float, vx: float, vy: float,
+                     vz: float, wx: float, wy: float, wz: float, lift_m: float,
+                     inflow_m: float, g: float, wn: float, we: float, wd: float,
+                     rotor_m: float, cx_m: float, cy_m: float, cz_m: float) -> tuple[float, ...]:
+    """:func:`_derivative` with drag on the airspeed: wind ``(wn, we, wd)`` NED [m/s], rotor
+    drag / m ``rotor_m`` [1/s] at this stage's rotor speed, parasitic drag / m ``c*_m``
+    [1/m] (see the module doc)."""
+    s0, s1, s2, s3 = q0 * q0, q1 * q1, q2 * q2, q3 * q3
+    r00, r11, r22 = s0 + s1 - s2 - s3, s0 - s1 + s2 - s3, s0 - s1 - s2 + s3
+    r01, r10 = 2.0 * (q1 * q2 - q0 * q3), 2.0 * (q1 * q2 + q0 * q3)
+    r02, r20 = 2.0 * (q1 * q3 + q0 * q2), 2.0 * (q1 * q3 - q0 * q2)
+    r12, r21 = 2.0 * (q2 * q3 - q0 * q1), 2.0 * (q2 * q3 + q0 * q1)
+    ax = vx - (r00 * wn + r10 * we + r20 * wd)  # airspeed, body axes: v - eCb^T w
+    ay = vy - (r01 * wn + r11 * we + r21 * wd)
+    az = vz - (r02 * wn + r12 * we + r22 * wd)
+    speed = math.sqrt(ax * ax + ay * ay + az * az)
+    return (
+        r00 * vx + r01 * vy + r02 * vz,
+        r10 * vx + r11 * vy + r12 * vz,
+        r20 * vx + r21 * vy + r22 * vz,
+        0.5 * (-wx * q1 - wy * q2 - wz * q3),
+        0.5 * (wx * q0 + wz * q2 - wy * q3),
+        0.5 * (wy * q0 - wz * q1 + wx * q3),
+        0.5 * (wz * q0 + wy * q1 - wx * q2),
+        g * r20 - (rotor_m + cx_m * speed) * ax - (wy * vz - wz * vy),
+        g * r21 - (rotor_m + cy_m * speed) * ay - (wz * vx - wx * vz),
+        g * r22 + lift_m + inflow_m * az - cz_m * speed * az - (wx * vy - wy * vx),
     )
 
 

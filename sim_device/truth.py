@@ -16,7 +16,7 @@ key                 shape      meaning
                                bit3 thrust) = that channel is the ground station's
 ``serial_active``   (N,)       bool, the ground station controls at least one channel
 ``on_ground``       (N,)       bool, resting on the floor
-``lift``            (N,)       rotor force along body z including battery droop [N]
+``lift``            (N,)       rotor force along body z with droop and ground effect [N]
 ``columns``         ()         this table as text
 ==================  =========  ==============================================================
 
@@ -76,7 +76,7 @@ def snapshot(plant: Plant, sticks: Sticks, ctrl_mask: int) -> TruthState:
         quaternion=np.array([plant.q0, plant.q1, plant.q2, plant.q3]),
         omega=np.array([plant.wx, plant.wy, plant.wz]),
         specific_force=np.array(plant.specific_force()),
-        lift=plant.battery_factor() * plant.lift,
+        lift=plant.lift_factor() * plant.lift,
         on_ground=plant.on_ground,
         sticks=sticks,
         ctrl_mask=ctrl_mask,
@@ -104,7 +104,7 @@ class TruthLog:
             plant.t, plant.px, plant.py, plant.pz, vn, ve, vd, plant.vx, plant.vy, plant.vz,
             plant.q0, plant.q1, plant.q2, plant.q3, plant.wx, plant.wy, plant.wz,
             sticks.roll, sticks.pitch, sticks.yaw, sticks.thrust, ctrl_mask,
-            ctrl_mask != 0, plant.on_ground, plant.battery_factor() * plant.lift,
+            ctrl_mask != 0, plant.on_ground, plant.lift_factor() * plant.lift,
         )
         self._n += 1
 

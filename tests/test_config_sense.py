@@ -430,6 +430,7 @@ WITHOUT_NUMBERS: dict[str, Any] = {
     "sim.faults.stall_at_s": 5.0,
     "sim.vicon.outages": [[1.0, 2.0]],
     "sim.faults.thrust_faults": [[12.0, 0.3, 2.0]],
+    "sim.payload_steps": [[20.0, 1.2]],
 }
 UNBOUNDED_ABOVE = {"sim.seed": "numpy takes any non-negative seed"}
 
