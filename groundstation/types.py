@@ -96,6 +96,8 @@ class StateEstimate:
     acc_bias : (3,) estimated accelerometer bias, FRD [m/s^2]
     covariance_diag : (16,) diagonal of the state covariance, same order as the
         EKF state [P, q, v, gyro_bias, acc_bias]
+    specific_force : (3,) bias-corrected accelerometer reading, FRD [m/s^2] (last IMU
+        sample; about (0, 0, -g) in hover); NaN where no accelerometer was read
     """
 
     t: float
@@ -106,6 +108,7 @@ class StateEstimate:
     gyro_bias: FloatArray
     acc_bias: FloatArray
     covariance_diag: FloatArray
+    specific_force: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
 
 
 @dataclass(frozen=True, slots=True)

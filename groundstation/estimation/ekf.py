@@ -262,11 +262,13 @@ class Ekf:
         for h, g1, a1 in self._substeps(dt, imu.gyro, imu.acc):  # as the filter steps
             propagate(x, g0, a0, g1, a1, h, self._g, x)
             g0, a0 = g1, a1
-        return self._estimate_of(float(imu.t), x, imu.gyro)
+        return self._estimate_of(float(imu.t), x, imu.gyro, imu.acc)
 
-    def _estimate_of(self, t: float, x: FloatArray, gyro: FloatArray) -> StateEstimate:
-        """A StateEstimate of state ``x`` at ``t`` with the measured ``gyro`` there and
-        the filter's covariance (the quaternion block mapped from the attitude error)."""
+    def _estimate_of(self, t: float, x: FloatArray, gyro: FloatArray,
+                     acc: FloatArray | None = None) -> StateEstimate:
+        """A StateEstimate of state ``x`` at ``t`` with the measured ``gyro`` and ``acc``
+        there (default: the filter's last input) and the filter's covariance (the
+        quaternion block mapped from the attitude error)."""
         P = self._P
         q0, q1, q2, q3 = x[3:7].tolist()
         Xi = np.array([[-q1, -q2, -q3], [q0, -q3, q2], [q3, q0, -q1], [-q2, q1, q0]])
@@ -282,6 +284,7 @@ class Ekf:
             gyro_bias=x[10:13].copy(),
             acc_bias=x[13:16].copy(),
             covariance_diag=cov,
+            specific_force=(self._acc if acc is None else acc) - x[13:16],
         )
 
     def health(self) -> EkfHealth:

@@ -78,6 +78,9 @@ def _logged_estimate(row: np.void) -> StateEstimate:
         gyro_bias=np.array(row["est_gyro_bias"], dtype=float),
         acc_bias=np.array(row["est_acc_bias"], dtype=float),
         covariance_diag=np.array(row["est_covariance_diag"], dtype=float),
+        # the newest sample, bias-corrected, as the estimator hands it on
+        specific_force=np.array(row["acc"], dtype=float) - np.array(row["est_acc_bias"],
+                                                                   dtype=float),
     )
 
 
