@@ -21,10 +21,11 @@ lint: install
 typecheck: install
 	$(BIN)/mypy
 
-# Test workers (pytest-xdist). The real-time flights (marker `realtime`) are one xdist
-# group: one worker flies them one after another, mostly waiting on the wall clock, while
-# the others run the pure tests; so one worker more than the 2 cores of CI's machine.
-WORKERS ?= 3
+# Test workers (pytest-xdist). The real-time flights (mark `realtime`) are one xdist group
+# and the grounded virtual vehicles (`virtual_vehicle`) another: one worker each, mostly
+# waiting on the wall clock, runs them one after another, while the others run the pure
+# tests (tests/conftest.py); so more workers than the 2 cores of CI's machine.
+WORKERS ?= 4
 
 pytest: install
 	$(BIN)/pytest -q -n $(WORKERS) --dist loadgroup
@@ -34,7 +35,7 @@ test: lint typecheck pytest
 # The edit-run loop: no real-time flight and no long simulation (under 90 s); `make test`
 # runs everything
 test-fast: install
-	$(BIN)/pytest -q -n $(WORKERS) --dist loadgroup -m "not realtime and not slow"
+	$(BIN)/pytest -q -n 2 -m "not realtime and not virtual_vehicle and not slow"
 
 # `make demo PROTOCOL=asctec-ll` flies the virtual AscTec LL vehicle instead of the X-3D
 PROTOCOL ?= x3d

@@ -2,12 +2,16 @@
 
 * The autouse ``no_leaks`` fixture fails any test that leaves threads, sockets or
   pseudo-terminals open (STYLE.md item 14, python-can's conftest).
-* A test that flies in real time (a virtual vehicle on a pty, the flight daemon, a
-  ``gs fly`` or ``gs sim-device`` process) is marked ``realtime``: the mark puts it in one
-  ``xdist_group``, so under ``pytest -n N --dist loadgroup`` (``make test``) the real-time
-  flights run one after another on one worker, never beside each other, and
-  ``make test-fast`` leaves them out (``-m "not realtime"``). A test that starts such a
-  flight without the mark fails and says so, so the mark cannot go stale.
+* A test that flies in real time (the flight daemon, in this process or as ``gs fly``,
+  against a virtual vehicle on a pty) is marked ``realtime``; a test that runs a virtual
+  vehicle in real time that nobody flies (``gs calibrate``, ``gs link-check``,
+  ``gs motors``, the pty itself) is marked ``virtual_vehicle``. Each mark puts its tests
+  in one ``xdist_group``, so under ``pytest -n N --dist loadgroup`` (``make test``) one
+  worker flies the real-time flights one after another (never two at once), another
+  runs the grounded vehicles one after another, and ``make test-fast`` leaves both out.
+  A test that starts either without its mark fails and says which mark it needs, so the
+  marks cannot go stale. The tests of a module that share a module-scoped fixture (a
+  recorded flight) are a group too, so the fixture is made once, not once per worker.
 * Hypothesis runs derandomized and without its wall-clock deadline: a property test
   draws the same examples on every run (a pass cannot depend on the draw), and a loaded
   machine cannot fail it.
@@ -33,71 +37,121 @@ DATA = Path(__file__).resolve().parent / "data"
 settings.register_profile("groundstation", deadline=None, derandomize=True)
 settings.load_profile("groundstation")
 
-REALTIME_GROUP = "realtime"
-"""The xdist group of every ``realtime`` test: one worker flies them one at a time."""
+GROUPS = {"realtime": "realtime-flights", "virtual_vehicle": "virtual-vehicles"}
+"""Mark -> the xdist group whose tests one worker runs one at a time."""
 
-_flights_started: list[str] = []
-"""What the current test started that flies in real time (see :func:`_watch`)."""
+_started: dict[str, list[str]] = {"vehicle": [], "flight": []}
+"""What the current test started in real time: virtual vehicles and flights."""
 
 
-def _watch(owner: Any, name: str, what: str) -> None:
-    """Record in :data:`_flights_started` each call of ``owner.name``."""
+def _watch(owner: Any, name: str, kind: str, what: str) -> None:
+    """Record ``what`` under ``kind`` in :data:`_started` at each call of ``owner.name``."""
     original: Callable[..., Any] = getattr(owner, name)
 
     @functools.wraps(original)
     def watched(*args: Any, **kwargs: Any) -> Any:
-        _flights_started.append(what)
+        _started[kind].append(what)
         return original(*args, **kwargs)
 
     setattr(owner, name, watched)
 
 
-def _starts_a_flight(args: object) -> bool:
-    """``args`` of a process that runs a virtual vehicle in real time: ``gs sim-device`` or
-    ``gs fly --demo`` (also as ``python -m groundstation ...``). A ``gs fly`` against a
-    vehicle the test started is caught by the vehicle; one that cannot start is quick."""
+def _kinds_of_process(args: object) -> list[str]:
+    """What a process with ``args`` runs in real time: ``gs sim-device`` a vehicle, ``gs fly``
+    a flight (``--demo``: and its vehicle); also as ``python -m groundstation ...``."""
     words = [os.fspath(a) if isinstance(a, str | os.PathLike) else str(a)
              for a in (args if isinstance(args, Sequence) and not isinstance(args, str)
                        else str(args).split())]
-    return "sim-device" in words or ("fly" in words and "--demo" in words)
+    kinds = []
+    if "sim-device" in words or ("fly" in words and "--demo" in words):
+        kinds.append("vehicle")
+    if "fly" in words:
+        kinds.append("flight")
+    return kinds
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    from groundstation.loop.daemon import FlightDaemon
     from sim_device.realtime import SimDeviceProcess, SimDeviceThread
 
-    _watch(SimDeviceThread, "__enter__", "SimDeviceThread")
-    _watch(SimDeviceProcess, "__enter__", "SimDeviceProcess")
+    _watch(SimDeviceThread, "__enter__", "vehicle", "SimDeviceThread")
+    _watch(SimDeviceProcess, "__enter__", "vehicle", "SimDeviceProcess")
+    _watch(FlightDaemon, "run", "flight", "FlightDaemon.run")
     popen_init = subprocess.Popen.__init__
 
     @functools.wraps(popen_init)
     def init(self: subprocess.Popen[Any], args: Any, *rest: Any, **kwargs: Any) -> None:
-        if _starts_a_flight(args):
-            _flights_started.append(f"a process: {' '.join(map(str, args))[:80]}")
+        for kind in _kinds_of_process(args):
+            _started[kind].append(f"a process: {' '.join(map(str, args))[:80]}")
         popen_init(self, args, *rest, **kwargs)
 
     subprocess.Popen.__init__ = init  # type: ignore[method-assign]
 
 
+def _shares_a_module_fixture(item: pytest.Item) -> bool:
+    """The test uses a module-scoped fixture of its own module (a recorded flight, a
+    simulation): under xdist each worker that runs one of the module's tests would make
+    it again, so the module's tests that use it run on one worker."""
+    info = getattr(item, "_fixtureinfo", None)
+    module = item.nodeid.split("::")[0]
+    for name in info.names_closure if info is not None else ():
+        defs = info.name2fixturedefs.get(name) if info is not None else None
+        if defs and defs[-1].scope in ("module", "package") and defs[-1].baseid == module:
+            return True
+    return False
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups into the node ids
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
-        if item.get_closest_marker("realtime") is not None:
-            item.add_marker(pytest.mark.xdist_group(REALTIME_GROUP))
+        for mark, group in GROUPS.items():
+            if item.get_closest_marker(mark) is not None:
+                item.add_marker(pytest.mark.xdist_group(group))
+        if item.get_closest_marker("xdist_group") is None and _shares_a_module_fixture(item):
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """In an xdist worker under ``--dist loadgroup``: every grouped test's node id carries
+    its group, or the groups would be ignored without a word (pytest 9.2 with
+    pytest-xdist 3.8 did that) and real-time flights would fly side by side."""
+    if not session.config.getoption("loadgroup", default=False):
+        return
+    lost = [item.nodeid for item in session.items
+            if item.get_closest_marker("xdist_group") is not None and "@" not in item.nodeid]
+    if lost:
+        raise pytest.UsageError(
+            f"--dist loadgroup is not grouping ({len(lost)} tests, e.g. {lost[0]}): this "
+            "pytest and pytest-xdist do not work together; install the versions "
+            "pyproject.toml's dev extra asks for")
 
 
 def pytest_runtest_logstart(nodeid: str, location: object) -> None:
-    _flights_started.clear()
+    for started in _started.values():
+        started.clear()
+
+
+def _mark_needed(item: pytest.Item) -> str | None:
+    """The mark the test's real-time activity needs and it lacks, or None. A flight needs
+    ``realtime`` only with a vehicle (a ``gs fly`` without one fails at once)."""
+    vehicle, flight = _started["vehicle"], _started["flight"]
+    if vehicle and flight and item.get_closest_marker("realtime") is None:
+        return "realtime"
+    if vehicle and not flight and not any(item.get_closest_marker(m) for m in GROUPS):
+        return "virtual_vehicle"
+    return None
 
 
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
     outcome = yield
     report = outcome.get_result()  # type: ignore[attr-defined]
-    if (call.when == "teardown" and _flights_started and report.passed
-            and item.get_closest_marker("realtime") is None):
+    if call.when == "teardown" and report.passed and (mark := _mark_needed(item)) is not None:
+        what = ", ".join(_started["vehicle"] + _started["flight"])
         report.outcome = "failed"
-        report.longrepr = (f"{item.nodeid} flies in real time ({', '.join(_flights_started)}) "
-                           "but is not marked realtime: add @pytest.mark.realtime so it runs "
-                           "alone in the real-time group (tests/conftest.py)")
+        report.longrepr = (f"{item.nodeid} runs in real time ({what}) but is not marked "
+                           f"{mark}: add @pytest.mark.{mark} so it runs in its group, one "
+                           "test at a time (tests/conftest.py)")
 
 
 def _io_fds() -> set[str]:

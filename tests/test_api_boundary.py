@@ -232,6 +232,7 @@ def requests(draw: st.DrawFn) -> dict[str, Any]:
     return request
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(requests())
 def test_every_reply_is_ok_or_a_refusal_of_a_documented_kind(request_: dict[str, Any]) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pytest
 from lab_helpers import sim_config
 
 from groundstation.loop.api import MotionApi
@@ -18,6 +19,7 @@ from groundstation.loop.inprocess import InProcessFlight
 from groundstation.loop.supervisor import Outcome, State
 
 
+@pytest.mark.slow
 def test_a_failsafe_preempts_a_motion_and_refuses_new_ones_until_it_clears() -> None:
     cfg = sim_config(**{"trajectory.name": "none"})
     flight = InProcessFlight(cfg)
@@ -79,6 +81,7 @@ FIGURE8_3000 = {"name": "figure-eight", "period_s": 3000, "center": [0.0, 0.0, -
 """The hostile tester's legal request: a figure-eight with a 3000 s lap."""
 
 
+@pytest.mark.slow
 def test_the_hostile_requests_are_refused_and_the_legal_one_flown_safely() -> None:
     """The hostile tester's requests, in TRACK on the simulated clock: each absurd number
     refused as a request, the 3000 s lap refused as longer than a motion may be, a target

@@ -88,6 +88,7 @@ sticks = st.builds(Sticks, stick, stick, stick, st.integers(0, 4096))
 channel_sets = st.frozensets(st.sampled_from(CHANNELS))
 
 
+@pytest.mark.slow
 @given(st.lists(st.tuples(channel_sets, sticks, sticks, st.floats(0.0, 0.5)), max_size=12))
 def test_handover_invariants(steps: list[tuple[frozenset[Channel], Sticks, Sticks, float]]) -> None:
     blend = 0.4

@@ -209,6 +209,7 @@ def test_stream_split_at_arbitrary_points(msgs: list[Message], cuts: list[int]) 
     assert decoder.buffered == 0
 
 
+@pytest.mark.slow
 @settings(max_examples=200)
 @given(
     st.lists(st.tuples(garbage, messages), max_size=6),

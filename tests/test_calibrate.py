@@ -90,7 +90,7 @@ def lab(request: pytest.FixtureRequest,
         yield ground_file, lab_cfg
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 @pytest.mark.slow
 @pytest.mark.parametrize("lab", ["imu"], indirect=True)
 def test_calibrate_imu_recovers_the_planted_zeros_and_noise(
@@ -124,7 +124,7 @@ def test_calibrate_imu_recovers_the_planted_zeros_and_noise(
     assert "paste into the configuration" in human.stdout and "gyro_zero:" in human.stdout
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 @pytest.mark.slow
 @pytest.mark.parametrize("lab", ["vicon"], indirect=True)
 def test_calibrate_vicon_recovers_the_noise_and_finds_a_wrong_frame(
@@ -159,7 +159,7 @@ def test_calibrate_vicon_recovers_the_noise_and_finds_a_wrong_frame(
         Rotation.from_euler("XYZ", [180, 0, 0], degrees=True).as_matrix(), abs=0.03)
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 @pytest.mark.slow
 @pytest.mark.parametrize(("lab_overrides", "what"), [
     # The pilot lifts it off slowly: 1.6-4 cm/s for half a minute (the battery droops),
@@ -188,6 +188,7 @@ def test_a_moving_vehicle_is_refused(tmp_path: Path, lab_overrides: dict[str, ob
     assert what in out.stderr
 
 
+@pytest.mark.slow
 def test_no_vehicle_is_a_clear_error(tmp_path: Path) -> None:
     out = gs("calibrate", "imu", "--config", str(ROOT / "config" / "sim.yaml"),
              "--serial-port", str(tmp_path / "no-such-port"), "--seconds", "1")
@@ -209,6 +210,7 @@ def _vicon_at_rest(rng: np.random.Generator, n: int, turn_deg: float = 0.0) -> n
     return np.roll(seen.as_quat(), 1, axis=1)
 
 
+@pytest.mark.slow
 def test_the_stillness_check_tells_noise_from_motion() -> None:
     """2 s at 80 Hz of a noisy Vicon at rest: the window means scatter by 0.15 to 0.25 deg
     per axis, so a fixed 1 deg limit refused about one such measurement in 25 (counted here

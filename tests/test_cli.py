@@ -8,6 +8,7 @@ import threading
 from pathlib import Path
 
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from groundstation.cli import app
@@ -17,6 +18,7 @@ REPO = Path(__file__).resolve().parents[1]
 runner = CliRunner()
 
 
+@pytest.mark.slow
 def test_eval_fast_one_scenario(tmp_path: Path) -> None:
     out = tmp_path / "eval"
     res = runner.invoke(app, ["eval", "--config", str(REPO / "config" / "sim.yaml"), "--fast",
@@ -36,6 +38,7 @@ def test_eval_rejects_an_unknown_scenario() -> None:
     assert "loop-the-loop" in res.output
 
 
+@pytest.mark.slow
 def test_report_and_export_of_a_recorded_flight(tmp_path: Path) -> None:
     from groundstation.config import apply_overrides, dump_config, load_config
     from groundstation.loop.inprocess import fly_in_process
@@ -96,6 +99,7 @@ def test_channels_talks_to_the_control_socket() -> None:
                     {"request": "channels", "auto": ["yaw"]}]
 
 
+@pytest.mark.slow
 def test_channels_with_curve_keys(tmp_path: Path) -> None:
     import zmq.auth
 
@@ -146,6 +150,7 @@ def _config_file(tmp_path: Path, text: str) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_check_config_refuses_a_trajectory_outside_the_volume(tmp_path: Path) -> None:
     good = runner.invoke(app, ["check-config", "--show", str(_config_file(
         tmp_path, "trajectory:\n  name: square\n"))])

@@ -54,6 +54,7 @@ def test_gs_keys_never_overwrites_a_key(tmp_path: Path) -> None:
     assert bad.exit_code == 2 and "plain file name" in bad.output
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args", [
     ["goto", "0.5", "0", "-1"],  # a negative coordinate is an argument, not an option
     ["status"], ["hold"], ["land"],

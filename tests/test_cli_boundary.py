@@ -30,6 +30,7 @@ def test_the_console_script_is_the_boundary() -> None:
     assert scripts["gs"] == "groundstation.cli:main"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("args", "code", "text"), [
     (("check-config", "missing.yaml"), 2, "missing.yaml: cannot read"),
     (("check-config", "config"), 2, "config: cannot read"),
@@ -66,6 +67,7 @@ def flight_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return Path(recorder.directory)
 
 
+@pytest.mark.slow
 def test_a_truth_file_that_is_not_one_is_an_error_line(flight_log: Path,
                                                        tmp_path: Path) -> None:
     bad = tmp_path / "other.npy"
@@ -75,6 +77,7 @@ def test_a_truth_file_that_is_not_one_is_an_error_line(flight_log: Path,
     assert "other.npy" in out.stderr and "Traceback" not in out.stderr
 
 
+@pytest.mark.slow
 def test_a_closed_pipe_exits_quietly(flight_log: Path) -> None:
     child = subprocess.Popen([*GS, "export", str(flight_log)], stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, cwd=ROOT)
@@ -95,6 +98,7 @@ def _without(package: str, tmp_path: Path) -> dict[str, str]:
     return {"PYTHONPATH": str(tmp_path / "site")}
 
 
+@pytest.mark.slow
 def test_a_missing_optional_package_names_the_extra(flight_log: Path, tmp_path: Path) -> None:
     out = _gs("export", str(flight_log), "--format", "mcap", "--out", str(tmp_path / "f.mcap"),
               env=_without("foxglove", tmp_path))  # the MCAP is foxglove-sdk's writer's
@@ -103,6 +107,7 @@ def test_a_missing_optional_package_names_the_extra(flight_log: Path, tmp_path: 
     assert "Traceback" not in out.stderr
 
 
+@pytest.mark.slow
 def test_a_report_without_matplotlib_still_writes_its_metrics(flight_log: Path,
                                                               tmp_path: Path) -> None:
     out = _gs("report", str(flight_log), "--out", str(tmp_path / "r"),

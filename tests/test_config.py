@@ -136,6 +136,7 @@ def test_dump_round_trips() -> None:
     assert validate_config(yaml.safe_load(dump_config(cfg))) == cfg
 
 
+@pytest.mark.slow
 def test_cli_check_config(repo: Path, tmp_path: Path) -> None:
     ok = runner.invoke(app, ["check-config", "--show", str(repo / "config" / "lab.yaml")])
     assert ok.exit_code == 0, ok.output

@@ -104,6 +104,7 @@ def test_load_config_refuses_each_finding(tmp_path: Path, name: str, content: by
         assert field == named and reason in why, info.value.problems
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "content", "named", "reason"), FINDINGS,
                          ids=[f[0] for f in FINDINGS])
 def test_gs_check_config_refuses_each_finding_with_exit_2_on_one_line(
@@ -139,6 +140,7 @@ def _commands_reading_a_config() -> Iterator[tuple[list[str], Any]]:
     yield from walk(typer.main.get_command(app), [])
 
 
+@pytest.mark.slow
 def test_every_command_that_reads_a_config_refuses_a_nul_byte_in_one_line(
         tmp_path: Path) -> None:
     """The commands share one loader: each refuses the NUL byte with the same line."""
@@ -490,6 +492,7 @@ HUGE_INT = st.integers(min_value=10 ** 9, max_value=10 ** 30)
 ABSURD_INT = st.one_of(HUGE_INT, HUGE_INT.map(lambda n: -n), ABSURD_FLOAT)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("leaf", LEAVES, ids=lambda leaf: ".".join(
     [leaf.path, *map(str, leaf.index)]))
 @settings(max_examples=8, deadline=None, database=None,

@@ -100,6 +100,7 @@ UNIQUE = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("literal", UNIQUE)
 def test_each_thesis_number_is_written_once(literal: str) -> None:
     value = float(literal)

@@ -207,6 +207,7 @@ def test_bad_requests_get_an_error_reply_and_the_server_keeps_serving(
     assert server.stats()["malformed"] == 1
 
 
+@pytest.mark.slow
 def test_a_request_over_64_kib_never_reaches_the_handler() -> None:
     seen: list[Any] = []
 
@@ -307,6 +308,7 @@ def keys(tmp_path: Path) -> dict[str, Path]:
     return out
 
 
+@pytest.mark.slow
 def test_with_curve_only_an_authorised_client_is_served(keys: dict[str, Path]) -> None:
     curve = load_server_keys(keys["server_secret"], keys["clients"])
     with ControlServer("tcp://127.0.0.1:*", curve=curve) as server, _serving(server):

@@ -82,6 +82,7 @@ def _second_lap(r: SimResult) -> tuple[float, float]:
             time_lag(r.position[w, :2], r.reference[w, :2], float(r.t[1] - r.t[0])))
 
 
+@pytest.mark.slow
 def test_square_constant_velocity_lqr_has_the_least_lag_and_error(square_runs) -> None:
     # The thesis's central result (Ch. 11.3, Fig. 11.5-11.6), on the second lap.
     rms = {k: _second_lap(v)[0] for k, v in square_runs.items()}
@@ -114,6 +115,7 @@ def test_constant_velocity_lqr_overshoots_corners_only_briefly(square_runs) -> N
     assert err[straight].max() < 0.015  # reached 0.011 m
 
 
+@pytest.mark.slow
 def test_saturation_never_produces_out_of_range_sticks() -> None:
     # An aggressive LQR (cheap inputs) and a 1 m step: the outputs saturate
     ctrl = LqrController(r_input=(0.01, 0.01, 0.01, 0.01), q_error=(50, 50, 50, 8))
@@ -127,6 +129,7 @@ def test_saturation_never_produces_out_of_range_sticks() -> None:
     assert abs(pid.position[-1, 2] + 2.0) < 0.02  # and it still arrives
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["lqr-cv", "pid"])
 def test_ten_percent_thrust_error_leaves_no_steady_state_error(name: str) -> None:
     r = simulate(FACTORIES[name](), make_trajectory("hover"), 20.0,
@@ -135,6 +138,7 @@ def test_ten_percent_thrust_error_leaves_no_steady_state_error(name: str) -> Non
     assert abs(np.mean(r.position[-300:, 2]) + 1.0) < 0.003
 
 
+@pytest.mark.slow
 def test_without_the_observer_the_thrust_error_is_the_closed_form_offset() -> None:
     ctrl = LqrController(disturbance_tau=None)
     r = simulate(ctrl, make_trajectory("hover"), 20.0, plant=SimPlant(thrust_scale=0.9))
@@ -147,6 +151,7 @@ def test_without_the_observer_the_thrust_error_is_the_closed_form_offset() -> No
     assert np.mean(r.position[-300:, 2]) + 1.0 == pytest.approx(expected, rel=0.02)
 
 
+@pytest.mark.slow
 def test_integral_action_also_removes_the_thrust_error() -> None:
     # the clamp must let K_i x_i reach the 0.65 N the 10 % error needs: |x_i| <= 2 m s
     ctrl = LqrController(q_integral=(0.5, 0.5, 2.0, 0.0), disturbance_tau=None,
@@ -159,6 +164,7 @@ def test_integral_action_also_removes_the_thrust_error() -> None:
     assert np.mean(r.position[-300:, 2]) + 1.0 > 0.02
 
 
+@pytest.mark.slow
 def test_velocity_from_reference_samples_as_the_thesis_did() -> None:
     # eq. 9.22-9.26 with the previous sample filtered: the feed-forward survives,
     # at the price of the filter's delay alpha / (1 - alpha) samples (1 sample = 0.02 s)
@@ -175,6 +181,7 @@ def test_velocity_from_reference_samples_as_the_thesis_did() -> None:
 ALL = {**FACTORIES, "lqr-ff": FeedforwardLqr}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(ALL))
 def test_every_controller_removes_a_15_percent_thrust_error(name: str) -> None:
     """Issue 13: zero steady-state error with the thrust map 15 % off, either way
@@ -185,6 +192,7 @@ def test_every_controller_removes_a_15_percent_thrust_error(name: str) -> None:
         assert abs(np.mean(r.position[-250:, 2]) + 1.0) < 0.003, (scale, r.position[-1])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(ALL))
 def test_every_controller_is_stable_with_each_rate_gain_30_percent_off(name: str) -> None:
     """Issue 13: each rate gain 30 % below or above the configured one (the independent

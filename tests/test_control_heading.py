@@ -88,6 +88,7 @@ def _square() -> PiecewiseLinear:
     return sq
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("shape", list(SHAPES))
 @pytest.mark.parametrize("name", list(FACTORIES))
 def test_the_same_errors_at_every_heading(name: str, shape: str) -> None:
@@ -108,6 +109,7 @@ HEADING_LIMITS = {  # (largest heading error, error 2 s after the turn) [deg]; r
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(FACTORIES))
 def test_a_full_turn_while_holding_position_changes_nothing(name: str) -> None:
     """A 360-degree turn in 20 s (min-jerk, peak 0.59 rad/s) while recovering from the

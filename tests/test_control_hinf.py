@@ -141,6 +141,7 @@ def test_old_rate_loop_design_fed_the_yaw_rate_back_positively(lag_gain: HinfGai
         assert np.max(np.abs(np.linalg.eigvals(M))) < 1.0
 
 
+@pytest.mark.slow
 def test_findings_hold_on_the_nonlinear_model(thesis_gain: HinfGain, lag_gain: HinfGain) -> None:
     step = make_trajectory("step-x", step_m=0.3)
     ideal = SimPlant(rate_tau=0.0, delay_s=0.0)
@@ -226,6 +227,7 @@ def _closed_loop_norm(gain: HinfGain, sp: StandardProblem) -> tuple[float, float
     return swept, float(control.norm(control.ss(A, B1, C1, sp.D11), p="inf"))
 
 
+@pytest.mark.slow
 def test_synthesis_meets_its_bound() -> None:
     """The LMI's gain keeps the closed loop's H-infinity norm below gamma = 1 (eq. 10.11)."""
     from groundstation.control.hinf import synthesise_hinf
@@ -237,6 +239,7 @@ def test_synthesis_meets_its_bound() -> None:
     assert swept == pytest.approx(reference, rel=1e-3)  # the sweep found the true peak
 
 
+@pytest.mark.slow
 def test_gs_synth_hinf_writes_a_gain_that_meets_its_bound(tmp_path: Path) -> None:
     """`gs synth hinf` end to end (the robust rate-loop design of config/sim.yaml)."""
     out = tmp_path / "hinf.npz"

@@ -65,6 +65,7 @@ def square_10hz() -> dict[str, tuple[float, float]]:
     return out
 
 
+@pytest.mark.slow
 def test_square_at_10hz_vicon_constant_velocity_lqr_wins(square_10hz) -> None:
     # The thesis's central result (Ch. 11.3) through the EKF at the Ch. 11 Vicon rate.
     # Reached (fixed-window cross-correlation, 50 Hz commands, rate-loop design model):
@@ -87,6 +88,7 @@ def _hover_z_offset(result: FlightResult, state: State) -> float:
     return float(np.mean(z - result.trace["ref_pos"][mask][last, 2]))
 
 
+@pytest.mark.slow
 def test_ten_percent_thrust_error_is_removed_by_the_observer() -> None:
     cfg = lab_config(**{"trajectory.name": "hover", "sim.thrust_scale": 0.9})
     params = quadrotor_params(cfg)
@@ -105,6 +107,7 @@ def test_ten_percent_thrust_error_is_removed_by_the_observer() -> None:
     assert _hover_z_offset(result, State.TAKEOFF) == pytest.approx(expected, rel=0.15)
 
 
+@pytest.mark.slow
 def test_hinf_findings_in_the_virtual_lab() -> None:
     cfg = lab_config(**{"trajectory.name": "hover"})
     params = quadrotor_params(cfg)
@@ -121,6 +124,7 @@ def test_hinf_findings_in_the_virtual_lab() -> None:
     assert err < 0.03  # reached 0.012 m
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("controller", ["lqr-ff", "lqr-cv"])
 def test_a_waypoint_file_turning_the_heading_once_around_flies(tmp_path: Path,
                                                                controller: str) -> None:

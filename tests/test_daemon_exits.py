@@ -250,6 +250,7 @@ def test_a_disk_that_fills_in_the_air_is_an_incomplete_log_not_a_success(
     assert states[-1] == int(State.DONE) and flat["cmd_mask"][-1] == 0  # the final row
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("outcome", "complete", "code"), [
     (Outcome.COMPLETED, True, 0), (Outcome.COMPLETED, False, 5),
     (Outcome.STOPPED, True, 4), (Outcome.STOPPED, False, 5),

@@ -33,6 +33,7 @@ RAW_VICON_ATT_RMS = float(np.sqrt(4 * (5.17e-6 + 9.74e-6 + 3.62e-6)))  # 8.6 mra
 CASES = [(1, 1e-3, 3e-3), (10, 2e-3, 6e-3), (100, 2.5e-2, 1e-2)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("trajectory", ["hover", "square"])
 @pytest.mark.parametrize(("every", "pos_bound", "att_bound"), CASES)
 def test_accuracy_hover_and_square(
@@ -52,6 +53,7 @@ def test_accuracy_hover_and_square(
         assert att < 0.5 * RAW_VICON_ATT_RMS
 
 
+@pytest.mark.slow
 def test_nis_and_nees_are_chi_square_consistent() -> None:
     # Truth biases random-walk with the filter's own densities, so the model matches.
     p = EkfParams()

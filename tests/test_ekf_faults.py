@@ -35,6 +35,7 @@ def _started(seed: int = 1, steps: int = 500) -> tuple[Ekf, TruthSimulator]:
     return ekf, sim
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [5, 6, 7])
 def test_one_second_outage_has_bounded_error_growth(seed: int) -> None:
     sim = TruthSimulator(square_reference(), noise=BIASED, seed=seed)
@@ -151,6 +152,7 @@ def _after_a_gap(gap_s: float = 1.5) -> tuple[Ekf, TruthSimulator]:
     return ekf, sim
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("error::RuntimeWarning")
 @pytest.mark.parametrize("position", [(1e297, 0.0, -1.0), (0.0, -1e308, 0.0),
                                       (100.0, 0.0, -1.0), (0.0, 0.0, 3.0)],

@@ -58,6 +58,7 @@ def test_lag_resolves_below_one_sample_by_parabolic_interpolation() -> None:
     assert abs(lag - 0.23) > 0.002 and abs(lag - 0.24) > 0.002
 
 
+@pytest.mark.slow
 def test_lag_on_jittered_tick_times_is_resampled() -> None:
     # Real-time ticks are not evenly spaced: +-3 ms of jitter on a 10 ms schedule.
     rng = np.random.default_rng(3)

@@ -174,6 +174,7 @@ def test_a_short_perturbed_suite_reports_every_seed_and_the_worst(tmp_path: Path
     assert not math.isnan(report.wall_s)
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("perturbed-flights")  # its flight is the targets' (seed 3)
 def test_gs_eval_takes_perturb_seeds(tmp_path: Path) -> None:
     from typer.testing import CliRunner

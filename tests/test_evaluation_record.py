@@ -161,6 +161,7 @@ def test_the_step_is_read_back_from_the_reference() -> None:
     assert step_from_reference(hover) is None
 
 
+@pytest.mark.slow
 def test_report_flight_writes_markdown_json_and_a_figure(tmp_path: Path) -> None:
     log = write_log(tmp_path / "logs")
     rep = report_flight(log, write_truth(tmp_path / "t.npz", T0 - 1.0), tmp_path / "out")

@@ -40,6 +40,7 @@ def log(tmp_path_factory: pytest.TempPathFactory) -> Path:
                       tmp_path_factory.mktemp("mcap"), 2.0)[0]
 
 
+@pytest.mark.slow
 def test_the_mcap_reads_back_with_the_logs_values(log: Path, tmp_path: Path) -> None:
     out = tmp_path / "flight.mcap"
     done = subprocess.run([sys.executable, "-m", "groundstation", "export", str(log),
@@ -84,6 +85,7 @@ def test_the_mcap_reads_back_with_the_logs_values(log: Path, tmp_path: Path) -> 
     assert metadata["groundstation"]["schema_version"] == str(meta["schema_version"])
 
 
+@pytest.mark.slow
 def test_mcap_needs_an_output_file(log: Path) -> None:
     done = subprocess.run([sys.executable, "-m", "groundstation", "export", str(log),
                            "--format", "mcap"], capture_output=True, text=True, timeout=60,
@@ -91,6 +93,7 @@ def test_mcap_needs_an_output_file(log: Path) -> None:
     assert done.returncode == 2 and "--out" in done.stderr
 
 
+@pytest.mark.slow
 def test_the_readmes_pandas_one_liner_works(log: Path) -> None:
     import pandas as pd
 

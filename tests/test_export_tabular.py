@@ -93,6 +93,7 @@ def _half_step(value: npt.NDArray[np.float64], digits: int,
     return 0.5 * 10.0 ** (magnitude - (digits - 1))
 
 
+@pytest.mark.slow
 def test_the_csv_reads_back_within_half_its_precision(log: Path, tmp_path: Path) -> None:
     out = tmp_path / "flight.csv"
     assert export_csv(log, out) == len(np.load(log / "flight.npy"))
@@ -119,6 +120,7 @@ def test_the_csv_reads_back_within_half_its_precision(log: Path, tmp_path: Path)
     assert set(table["state_name"]) >= {"TAKEOFF", "DONE"}
 
 
+@pytest.mark.slow
 def test_numpy_reads_the_csv_too(log: Path, tmp_path: Path) -> None:
     out = tmp_path / "flight.csv"
     export_csv(log, out)
@@ -142,6 +144,7 @@ def test_missing_values_are_empty_fields(log: Path) -> None:
     assert not any(field in ("nan", "-0") for row in lines[1:] for field in row)
 
 
+@pytest.mark.slow
 def test_the_csv_is_far_smaller_than_full_float_reprs(log: Path, tmp_path: Path) -> None:
     flat = np.load(log / "flight.npy")
     full = io.StringIO()  # what `gs export` wrote before: shortest round-trip reprs
@@ -152,6 +155,7 @@ def test_the_csv_is_far_smaller_than_full_float_reprs(log: Path, tmp_path: Path)
     assert out.stat().st_size < 0.6 * len(full.getvalue())
 
 
+@pytest.mark.slow
 def test_csv_goes_to_stdout_without_out(log: Path, tmp_path: Path) -> None:
     done = _gs("export", str(log))
     assert done.returncode == 0, done.stderr
@@ -160,6 +164,7 @@ def test_csv_goes_to_stdout_without_out(log: Path, tmp_path: Path) -> None:
     assert done.stdout == out.read_text()
 
 
+@pytest.mark.slow
 def test_the_parquet_reads_back_equal_with_units_and_meta(log: Path, tmp_path: Path) -> None:
     out = tmp_path / "flight.parquet"
     done = _gs("export", str(log), "--format", "parquet", "--out", str(out))
@@ -201,11 +206,13 @@ def test_an_empty_log_exports_a_header_and_no_rows(tmp_path: Path) -> None:
     assert pq.read_table(tmp_path / "flight.parquet").column_names == tabular_columns()
 
 
+@pytest.mark.slow
 def test_parquet_needs_an_output_file(log: Path) -> None:
     done = _gs("export", str(log), "--format", "parquet")
     assert done.returncode == 2 and "--out" in done.stderr
 
 
+@pytest.mark.slow
 def test_parquet_without_pyarrow_names_the_extra(log: Path, tmp_path: Path) -> None:
     fake = tmp_path / "site" / "pyarrow"
     fake.mkdir(parents=True)

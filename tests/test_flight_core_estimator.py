@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from ekf_truth import SensorNoise, TruthSimulator, square_reference
 
 from groundstation.config import validate_config
@@ -28,6 +29,7 @@ def _real_time_stream(n: int) -> list[tuple[ImuSample, Pose]]:
     return out
 
 
+@pytest.mark.slow
 def test_held_sample_fuses_every_pose_in_order_and_matches_replay() -> None:
     """The old arrangement (filter at the newest sample) fuses each of these poses by
     re-propagation; the flight core's must give the same estimate without any."""

@@ -58,6 +58,7 @@ def on_the_ground(result: FlightResult) -> bool:
     return bool(truth.on_ground and abs(truth.position[2]) < 0.02)
 
 
+@pytest.mark.slow
 def test_hover_flight_takes_off_holds_and_lands() -> None:
     result = fly_in_process(sim_config(), duration_s=8.0, max_time_s=60.0)
     assert states(result) == [State.TAKEOFF, State.TRACK, State.LAND, State.DISARM, State.DONE]
@@ -72,6 +73,7 @@ def test_hover_flight_takes_off_holds_and_lands() -> None:
     assert result.lab.truth.ctrl_mask == 0
 
 
+@pytest.mark.slow
 def test_square_lqr_cv_tracks_without_lag_at_10hz_vicon() -> None:
     cfg = sim_config(**{"trajectory.name": "square", "sim.vicon.rate_hz": 10.0})
     result = fly_in_process(cfg, duration_s=20.0, max_time_s=80.0)
@@ -82,6 +84,7 @@ def test_square_lqr_cv_tracks_without_lag_at_10hz_vicon() -> None:
     assert rms_xy < 0.07, rms_xy  # reached 0.043 m over 40 s; the thesis's Fig. 11.5 is ~0.1 m
 
 
+@pytest.mark.slow
 def test_vicon_outage_holds_then_resumes(tmp_path: Path) -> None:
     result = run_logged(sim_config(), tmp_path, 8.0, [(9.0, lambda f: f.lab.vicon_outage(1.0))])
     seq = states(result)
@@ -93,6 +96,7 @@ def test_vicon_outage_holds_then_resumes(tmp_path: Path) -> None:
     assert drift.max() < 0.1, drift.max()  # flew on the IMU estimate; reached ~1 cm
 
 
+@pytest.mark.slow
 def test_long_vicon_outage_lands_on_the_imu_and_never_disarms_in_the_air(
         tmp_path: Path) -> None:
     """Vicon goes for good: hold on the IMU, then land on it. The dead-reckoned height
@@ -123,6 +127,7 @@ def narrow_volume(flight: InProcessFlight) -> None:
     sup.limits = dataclasses.replace(sup.limits, volume_x=(-0.2, 0.2))
 
 
+@pytest.mark.slow
 def test_leaving_the_volume_hands_back_at_once(tmp_path: Path) -> None:
     """The default geofence action: the pilot gets the vehicle at once, and the vehicle
     was outside the volume (by the truth) when it did."""
@@ -134,6 +139,7 @@ def test_leaving_the_volume_hands_back_at_once(tmp_path: Path) -> None:
     assert result.lab.truth.ctrl_mask == 0
 
 
+@pytest.mark.slow
 def test_leaving_the_volume_lands_when_configured(tmp_path: Path) -> None:
     cfg = sim_config(**{"trajectory.name": "square", "safety.on_geofence": "land"})
     result = run_logged(cfg, tmp_path, 20.0, [(12.0, narrow_volume)])
@@ -142,6 +148,7 @@ def test_leaving_the_volume_lands_when_configured(tmp_path: Path) -> None:
     assert result.final_state is State.DONE and on_the_ground(result)
 
 
+@pytest.mark.slow
 def test_pilot_switch_takes_over_at_once(tmp_path: Path) -> None:
     result = run_logged(sim_config(), tmp_path, 20.0,
                         [(10.0, lambda f: f.lab.set_pilot(serial_enable=False))])
@@ -151,6 +158,7 @@ def test_pilot_switch_takes_over_at_once(tmp_path: Path) -> None:
     assert result.lab.truth.ctrl_mask == 0  # the vehicle is the pilot's
 
 
+@pytest.mark.slow
 def test_link_loss_stops_and_the_watchdog_hands_back(tmp_path: Path) -> None:
     result = run_logged(sim_config(), tmp_path, 20.0,
                         [(10.0, lambda f: f.lab.stall_data(5.0))])
@@ -159,6 +167,7 @@ def test_link_loss_stops_and_the_watchdog_hands_back(tmp_path: Path) -> None:
     assert result.lab.truth.ctrl_mask == 0
 
 
+@pytest.mark.slow
 def test_sigterm_lands_then_second_signal_hands_back(tmp_path: Path) -> None:
     def stop(f: InProcessFlight) -> None:
         f.stop_requests += 1
@@ -172,6 +181,7 @@ def test_sigterm_lands_then_second_signal_hands_back(tmp_path: Path) -> None:
     assert result.success and result.lab.truth.ctrl_mask == 0
 
 
+@pytest.mark.slow
 def test_wrong_vicon_rotation_is_refused_before_takeoff() -> None:
     right = sim_config(**{"safety.preflight_timeout_s": 6.0})
     lab = VirtualLab(right)  # the lab is set up correctly...
@@ -183,6 +193,7 @@ def test_wrong_vicon_rotation_is_refused_before_takeoff() -> None:
     assert on_the_ground(result)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("encoding", ["missing", "zero", "held-identity"])
 def test_every_loss_encoding_reads_as_no_measurement(encoding: str) -> None:
     cfg = sim_config(**{"sim.vicon.loss_encoding": encoding})
@@ -194,6 +205,7 @@ def test_every_loss_encoding_reads_as_no_measurement(encoding: str) -> None:
     assert np.nanmax(est_err[window]) < 0.02  # reached 5 mm; the IMU carried the estimate
 
 
+@pytest.mark.slow
 def test_hinf_from_config_flies_only_when_designed_with_the_rate_loop() -> None:
     """Thesis Ch. 10.3 through the whole stack: the packaged gain designed on the thesis's
     model tilts over on the lagged virtual plant (the tilt failsafe lands it); the gain
@@ -210,12 +222,14 @@ def test_hinf_from_config_flies_only_when_designed_with_the_rate_loop() -> None:
     assert "tilt" in land.reason
 
 
+@pytest.mark.slow
 def test_trace_truth_is_stamped_with_its_own_time() -> None:
     result = fly_in_process(sim_config(), duration_s=2.0, max_time_s=40.0)
     lead = result.trace["true_t"] - result.trace["t"]
     assert lead.min() >= -1e-9 and lead.max() <= 0.0101  # at most one DATA period newer
 
 
+@pytest.mark.slow
 def test_channels_handed_to_the_pilot_and_back_at_run_time(tmp_path: Path) -> None:
     """Thesis Ch. 1.2: fly some channels automatically, leave the others to the pilot.
     Yaw goes to the pilot at 9 s (cleared from the mask at once, the pilot's stick sent)
@@ -260,6 +274,7 @@ def test_channels_handed_to_the_pilot_and_back_at_run_time(tmp_path: Path) -> No
     assert rows["cmd_automatic"][after][sent[after]].all()
 
 
+@pytest.mark.slow
 def test_low_battery_lands_after_its_grace_time(tmp_path: Path) -> None:
     """Issue 14: the battery voltage the X-3D reports (STATUS) is logged, and a battery
     below safety.battery_land_v for safety.battery_grace_s lands the vehicle. The virtual
@@ -281,6 +296,7 @@ def test_low_battery_lands_after_its_grace_time(tmp_path: Path) -> None:
     assert volts[k] < 11.70 and np.all(np.diff(volts) <= 0.0011)
 
 
+@pytest.mark.slow
 def test_a_battery_low_for_less_than_the_grace_time_does_not_land() -> None:
     """One low sample under load (a sag) is not an empty battery."""
     cfg = sim_config(**{"safety.battery_land_v": 11.70, "safety.battery_grace_s": 2.0})
@@ -298,6 +314,7 @@ def test_a_battery_low_for_less_than_the_grace_time_does_not_land() -> None:
     assert result.success
 
 
+@pytest.mark.slow
 def test_a_watchdog_expiry_in_the_air_is_a_failsafe_event_with_its_duration(
         tmp_path: Path) -> None:
     """Finding 3's other half: the vehicle's watchdog expired in the air and the flight

@@ -163,6 +163,7 @@ def assert_flight_went_on(result: FlightResult, paused: bool, reference: float =
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("make", [absurd, far_away], ids=["x=1e300mm", "100m-away"])
 def test_absurd_poses_during_a_pause_are_never_fused(make: Callable[[InProcessFlight], Make],
                                                      pause_alone: float) -> None:
@@ -172,6 +173,7 @@ def test_absurd_poses_during_a_pause_are_never_fused(make: Callable[[InProcessFl
     assert vicon.poses > 0
 
 
+@pytest.mark.slow
 def test_a_consistent_pose_30cm_off_during_a_pause_overrules_the_estimate() -> None:
     """The decision: a consistent stream 30 cm off while the real one pauses is, to the
     ground station, the only Vicon there is, and poses that keep agreeing with each other
@@ -193,6 +195,7 @@ def test_a_consistent_pose_30cm_off_during_a_pause_overrules_the_estimate() -> N
     assert result.core.ekf.overruled[0] == 1 and vicon.outliers >= 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("make", [foreign_ahead, garbage_frames],
                          ids=["foreign-500-ahead", "frames-near-2**32"])
 def test_foreign_datagrams_do_not_blind_the_vehicle(make: Callable[[InProcessFlight], Make]

@@ -53,6 +53,7 @@ def true_scales(result: FlightResult) -> np.ndarray:
     return nominal / factor
 
 
+@pytest.mark.slow
 def test_scales_recover_the_planted_gyro_and_accelerometer_scales(
         lively: tuple[Path, FlightResult], tmp_path: Path) -> None:
     log, result = lively
@@ -119,6 +120,7 @@ def test_scales_refuse_a_short_log_and_one_without_vicon(
         identify_scales(log, axes=("gyro_w",))  # type: ignore[arg-type]
 
 
+@pytest.mark.slow
 def test_scales_refuse_a_hover(tmp_path: Path) -> None:
     log, _ = fly_logged(sim_config(**{"trajectory.name": "hover"}), tmp_path / "logs", 6.0)
     with pytest.raises(IdentificationError, match="gyro_x: too little excitation"):

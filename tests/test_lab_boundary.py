@@ -129,7 +129,7 @@ def test_announcement_round_trip_and_refusal() -> None:
             Announcement.from_json(bad)
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_sim_device_announces_itself_as_json(tmp_path: Path) -> None:
     """``gs sim-device --json`` prints the announcement first; the pty it names opens."""
     import serial

@@ -66,7 +66,7 @@ def assert_nothing_moved_it(truth_file: Path, *, configs: bool) -> None:
         assert not np.any(truth["sticks"])
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_healthy_x3d_link_as_a_user_runs_it(tmp_path: Path) -> None:
     with virtual_vehicle(tmp_path) as (device, cfg_file):
         done = subprocess.run([str(GS), "link-check", "-c", str(cfg_file), "--serial-port",
@@ -86,7 +86,7 @@ def test_healthy_x3d_link_as_a_user_runs_it(tmp_path: Path) -> None:
     assert_nothing_moved_it(tmp_path / "truth.npz", configs=True)
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_healthy_ll_link_polls_and_commands_nothing(tmp_path: Path) -> None:
     with virtual_vehicle(tmp_path, "asctec-ll") as (device, cfg_file):
         code, report = check(cfg_file, device.pty_path, "--seconds", "3")
@@ -100,7 +100,7 @@ def test_healthy_ll_link_polls_and_commands_nothing(tmp_path: Path) -> None:
     assert_nothing_moved_it(tmp_path / "truth.npz", configs=False)
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_a_corrupting_line_is_not_healthy(tmp_path: Path) -> None:
     """One bit flip per 500 bytes: about 8 % of the 41-byte DATA frames fail."""
     with virtual_vehicle(tmp_path, **{"sim.faults.corruption_rate": 2e-3}) as (device, cfg):
@@ -113,7 +113,7 @@ def test_a_corrupting_line_is_not_healthy(tmp_path: Path) -> None:
     assert_nothing_moved_it(tmp_path / "truth.npz", configs=True)
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_a_stalled_stream_is_not_healthy(tmp_path: Path) -> None:
     """The virtual X-3D sends nothing from 1.5 s to 2.5 s after it starts; the check
     listens from its start for 4 s."""
@@ -126,7 +126,7 @@ def test_a_stalled_stream_is_not_healthy(tmp_path: Path) -> None:
     assert_nothing_moved_it(tmp_path / "truth.npz", configs=True)
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_the_switch_off_is_not_healthy_unless_expected(tmp_path: Path) -> None:
     with virtual_vehicle(tmp_path, "asctec-ll", **{"sim.serial_enable": False}) as (
             device, cfg_file):
@@ -139,7 +139,7 @@ def test_the_switch_off_is_not_healthy_unless_expected(tmp_path: Path) -> None:
     assert_nothing_moved_it(tmp_path / "truth.npz", configs=False)
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_a_port_held_by_a_flight_exits_3_without_a_byte(tmp_path: Path) -> None:
     """The port is locked as gs fly locks it (pyserial exclusive: flock)."""
     with virtual_vehicle(tmp_path) as (device, cfg_file), \

@@ -38,7 +38,7 @@ def ll_lab(tmp_path: Path) -> Iterator[tuple[Path, str]]:
         yield config_file, device.pty_path
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_start_then_stop_on_request(ll_lab: tuple[Path, str]) -> None:
     config_file, pty = ll_lab
     started = gs("motors", "start", "--config", str(config_file), "--serial-port", pty)
@@ -49,7 +49,7 @@ def test_start_then_stop_on_request(ll_lab: tuple[Path, str]) -> None:
     assert "motors off" in stopped.stdout
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_refused_while_another_process_holds_the_port(ll_lab: tuple[Path, str]) -> None:
     config_file, pty = ll_lab
     cfg = apply_overrides(load_config(config_file), {"serial.port": pty})
@@ -59,7 +59,7 @@ def test_refused_while_another_process_holds_the_port(ll_lab: tuple[Path, str]) 
     assert "refused" in refused.stdout and "in use" in refused.stdout
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_the_x3d_dialect_has_no_gesture(ll_lab: tuple[Path, str]) -> None:
     config_file, pty = ll_lab
     out = gs("motors", "start", "--config", str(config_file), "--serial-port", pty,
@@ -73,7 +73,7 @@ def test_bad_action_is_a_usage_error(tmp_path: Path) -> None:
     assert out.returncode == 2 and "start or stop" in out.stderr
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_refused_while_the_vehicle_reports_flying(tmp_path: Path) -> None:
     cfg = apply_overrides(load_config(ROOT / "config" / "sim.yaml"),
                           {"serial.protocol": "asctec-ll", "vicon.port": free_udp_port(),

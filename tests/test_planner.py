@@ -117,6 +117,7 @@ def _soon(seconds: float = 30.0) -> float:
     return time.monotonic() + seconds
 
 
+@pytest.mark.slow
 # --------------------------------------------------------------------------- planning
 def test_a_motion_planned_in_the_planner_process_meets_its_boundary_conditions() -> None:
     commander = Commander(HOME, 0.0, arrival_tolerance_m=0.05, idle_land_s=60.0)
@@ -137,6 +138,7 @@ def test_a_motion_planned_in_the_planner_process_meets_its_boundary_conditions()
         os.waitpid(pid, os.WNOHANG)
 
 
+@pytest.mark.slow
 def test_a_plan_past_its_deadline_is_refused_and_the_planner_replaced() -> None:
     commander = Commander(HOME, 0.0, arrival_tolerance_m=0.05, idle_land_s=60.0)
     with PlannerProcess(SETTINGS, timeout_s=0.5) as planner:
@@ -160,6 +162,7 @@ def test_a_plan_past_its_deadline_is_refused_and_the_planner_replaced() -> None:
     assert np.allclose(pieces[-1].sample(99.0).position, [0.2, 0.0, -1.0])
 
 
+@pytest.mark.slow
 def test_a_planner_that_dies_or_fails_is_answered_internal_and_refusals_keep_their_kind(
         ) -> None:
     with PlannerProcess(SETTINGS, timeout_s=30.0) as planner:
@@ -179,6 +182,7 @@ def test_a_planner_that_dies_or_fails_is_answered_internal_and_refusals_keep_the
     assert closed.value.kind == "internal"
 
 
+@pytest.mark.slow
 def test_closing_ends_a_plan_under_way() -> None:
     planner = PlannerProcess(SETTINGS, timeout_s=60.0)
     planner.start()
@@ -205,6 +209,7 @@ def test_closing_ends_a_plan_under_way() -> None:
     assert planner.pid is None
 
 
+@pytest.mark.slow
 def test_a_planner_closed_while_it_starts_ends_quietly(capfd: pytest.CaptureFixture[str]
                                                        ) -> None:
     """Closed before it has imported (a flight that ends at once): reaped, and nothing on
@@ -220,6 +225,7 @@ def test_a_planner_closed_while_it_starts_ends_quietly(capfd: pytest.CaptureFixt
     assert capfd.readouterr().err == ""
 
 
+@pytest.mark.slow
 def test_the_planner_runs_at_normal_priority_in_a_process_group_of_its_own() -> None:
     """The daemon's threads run SCHED_FIFO in the air; its planner must not: a plan at
     real-time priority would compete with the loop for a core. Started from a SCHED_FIFO
@@ -283,6 +289,7 @@ def _collections_during(planner: Planner) -> tuple[list[int], tuple[int, int]]:
     return generations, result
 
 
+@pytest.mark.slow
 def test_a_churning_plan_leaves_this_process_young_only() -> None:
     """The hostile tester's plan kept hundreds of thousands of objects alive and every full
     collection of the daemon walked them. In the planner process the churn is the planner's

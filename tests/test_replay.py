@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 from groundstation.cli import app
@@ -27,6 +28,7 @@ def recorded_flight(tmp_path: Path) -> str:
     return directory
 
 
+@pytest.mark.slow
 def test_replay_with_the_flight_config_reproduces_it(tmp_path: Path) -> None:
     log = recorded_flight(tmp_path)
     report = replay_flight(log)
@@ -45,6 +47,7 @@ def test_replay_with_the_flight_config_reproduces_it(tmp_path: Path) -> None:
     assert changed.position_max_m < 1e-9  # the estimator did not change
 
 
+@pytest.mark.slow
 def test_cli_replay(tmp_path: Path) -> None:
     log = recorded_flight(tmp_path)
     res = CliRunner().invoke(app, ["replay", log])

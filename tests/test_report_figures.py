@@ -101,6 +101,7 @@ def png_size(path: Path) -> tuple[int, int]:
     return int(width), int(height)
 
 
+@pytest.mark.slow
 def test_every_figure_is_written_as_a_png_and_listed(report: FlightReport) -> None:
     out = report.report_md.parent
     assert [p.name for p in report.figures] == [f"{name}.png" for name in EXPECTED]

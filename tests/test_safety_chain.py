@@ -51,6 +51,7 @@ def disarmed_height(result: FlightResult) -> float:
     return float((-result.trace["true_pos"][:, 2])[result.during(State.DISARM)].max(initial=0.0))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("lift_scale", "vicon_hz"), [(2.0, 100.0), (2.0, 10.0), (1.6, 10.0),
                                                       (1.3, 100.0)])
 def test_a_thrust_fault_that_blinds_the_estimate_is_caught_by_the_truth(
@@ -91,6 +92,7 @@ class ArmedGlitch:
                          acceleration=wild, jerk=np.array([0.0, 84_500.0, 0.0]), yaw=ref.yaw)
 
 
+@pytest.mark.slow
 def test_a_reference_beyond_what_the_check_allowed_is_a_fault_not_an_input() -> None:
     cfg = sim_config(**{"trajectory.name": "figure-eight"})
     glitch = ArmedGlitch()
@@ -131,6 +133,7 @@ def helix_csv(path: Path, *, hz: float = 100.0, noise_m: float = 5e-4, seed: int
     return path
 
 
+@pytest.mark.slow
 def test_the_noisy_dense_helix_that_flew_away_is_flown_on_its_curve(tmp_path: Path) -> None:
     """The whole chain on the file of the fly-away: it is read as samples of a curve (not
     corners passed at rest), its feed-forward stays within the envelope, nothing fails

@@ -317,7 +317,7 @@ def test_bad_protocol_option_exits_2(repo: Path) -> None:
     assert result.exit_code == 2
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_gs_sim_device_protocol_asctec_ll_answers_polls_on_its_pty(repo: Path,
                                                                    tmp_path: Path) -> None:
     udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

@@ -43,7 +43,7 @@ def _read_until(port: serial.Serial, decoder: StreamDecoder,
     pytest.fail(f"condition not met within {timeout} s; got {len(msgs)} DATA messages")
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 def test_pty_round_trip_with_pyserial_and_udp(repo: Path, tmp_path: Path) -> None:
     udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
@@ -90,7 +90,7 @@ run_sim_device(cfg, truth_file=sys.argv[3], announce=lambda line: print(line, fl
 """
 
 
-@pytest.mark.realtime
+@pytest.mark.virtual_vehicle
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
 def test_signal_stops_the_run_and_writes_truth(repo: Path, tmp_path: Path, signum: int) -> None:
     truth = tmp_path / "truth.npz"

@@ -155,6 +155,7 @@ def test_rate_holds_when_ticks_do_not_divide_the_period() -> None:
     assert abs(count - 60) <= 1
 
 
+@pytest.mark.slow
 def test_publishing_without_subscriber_never_blocks(pub: TelemetryPublisher) -> None:
     body = snapshot()["state"]
     start = time.monotonic()
@@ -165,6 +166,7 @@ def test_publishing_without_subscriber_never_blocks(pub: TelemetryPublisher) -> 
     assert pub.sent == 10_000 and pub.dropped == 0 and pub.errors == 0
 
 
+@pytest.mark.slow
 def test_stuck_subscriber_drops_and_counts(pub: TelemetryPublisher) -> None:
     with TelemetryClient(pub.endpoint or "", rcvhwm=10) as client:
         join(pub, client)  # connected and subscribed; from now on the client never reads

@@ -43,6 +43,7 @@ def tracking_rms(file: Path) -> tuple[float, float]:
     return float(np.sqrt(np.mean(error ** 2))), float(np.count_nonzero(track)) / 100.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("period", "limit_m"), [(8.0, 0.010), (4.0, 0.025)])
 def test_a_dense_csv_figure_eight_is_flown_and_tracked(tmp_path: Path, period: float,
                                                        limit_m: float) -> None:
@@ -51,6 +52,7 @@ def test_a_dense_csv_figure_eight_is_flown_and_tracked(tmp_path: Path, period: f
     assert rms <= limit_m, f"{rms * 100:.2f} cm RMS"
 
 
+@pytest.mark.slow
 def test_the_crazyflie_figure8_is_flown_and_tracked() -> None:
     rms, tracked = tracking_rms(FIGURE8)
     assert tracked >= 7.28

@@ -6,7 +6,8 @@ for the X-3D and the AscTec LL dialect alike. The vehicle is the master side of 
 pseudo-terminal, played by a small responder thread per dialect that speaks the wire
 format from the specs (its encoders are the project's, whose bytes the codec tests
 check against the specs' vectors): the X-3D one streams DATA after CONFIG, the LL one
-answers polls and acknowledges commands.
+answers polls and acknowledges commands. Its timing (the poll grid, rates) is measured
+on the wall clock, so the module runs with the virtual vehicles, one test at a time.
 """
 
 from __future__ import annotations
@@ -44,6 +45,8 @@ from groundstation.types import Sticks
 
 DIALECTS = ["x3d", "asctec-ll"]
 WAIT = 5.0  # upper bound for anything to happen; tests never sleep this long
+pytestmark = pytest.mark.virtual_vehicle
+
 PERIOD = 0.01
 
 

@@ -175,6 +175,7 @@ def test_round_trip(frame: int, objs: list[ObjectPose]) -> None:
     )
 
 
+@pytest.mark.slow
 @given(st.lists(objects, min_size=1, max_size=4), st.data())
 def test_every_cut_inside_the_items_is_rejected(
     objs: list[ObjectPose], data: st.DataObject

@@ -524,6 +524,7 @@ def test_garbage_frame_numbers_neither_inflate_counters_nor_blind() -> None:
     assert h.restarts <= 6
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("error::RuntimeWarning")
 @settings(max_examples=300, deadline=None)
 @given(

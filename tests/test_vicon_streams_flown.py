@@ -28,6 +28,7 @@ SLOW_VICON = {"vicon.min_rate_hz": 0.5, "vicon.expected_rate_hz": 2.0,
 check at half the rate, HOLD only after 1.5 missed poses."""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("rate_hz", "limit_m"), [(1.0, 0.03), (10.0, 0.005), (100.0, 0.005)])
 def test_a_sender_with_exact_angles_flies(rate_hz: float, limit_m: float) -> None:
     """A level vehicle at heading 0 is reported with rotation exactly (0, 0, 0) while its
@@ -44,6 +45,7 @@ def test_a_sender_with_exact_angles_flies(rate_hz: float, limit_m: float) -> Non
     assert hover_rms(result) < limit_m, hover_rms(result)
 
 
+@pytest.mark.slow
 def test_a_stream_that_starts_while_the_object_is_occluded_flies_once_it_is_seen() -> None:
     """For its first 4 s the sender reports the object lost the thesis lab's way (zeros
     before it has a translation to hold): preflight waits, and passes once real poses
@@ -71,6 +73,7 @@ def test_a_vicon_preflight_failure_says_what_the_filter_saw() -> None:
     assert "gravity" not in reason  # nothing could be checked: no blame on the frames
 
 
+@pytest.mark.slow
 def test_a_second_sender_of_our_object_lands_the_flight() -> None:
     """A forger sends our object 0.5 m off beside the real stream: the pose filter passes
     none of its poses, and the supervisor lands (safety.on_second_stream) on the real one."""
