@@ -111,6 +111,7 @@ class Day:
         return done.stdout + done.stderr, Path(log.group(1))
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 @pytest.mark.timeout(900)  # about 4 min on an idle 2-core machine, three flights in real time
 def test_the_first_day_of_the_guide_on_the_virtual_lab(tmp_path: Path) -> None:
