@@ -916,13 +916,65 @@ class HinfConfig(ConfigModel):
     integral_limit: IntegralLimit = 2.0  # anti-windup clamp on each integrated error [m s]
 
 
+class ExternalForceConfig(ConfigModel):
+    """The external force from the accelerometer (control/external_force.py): the specific
+    force measured against the lift the COMMANDs sent predict, cancelled by the controller
+    (INDI's correction as a disturbance observer; beyond the thesis)."""
+
+    enabled: bool = True
+    # false: the integrators alone reject disturbances (as before)
+    fast_jerk_m_s4: Annotated[float, within(
+        0.0, 1000.0, "m/s^4: the rate noise of a filter; at 1000 it passes the noise",
+        lo_open=True)] = 10.0
+    # the vertical alpha-beta filter (4.0 Hz): the loop it closes through a mispredicted
+    # lift stays below 1 (small gain) for lift 0.74-1.35 x the model, delay +-15 ms
+    horizontal_jerk_m_s4: Annotated[float, within(
+        0.0, 1000.0, "m/s^4: the rate noise of a filter; at 1000 it passes the noise",
+        lo_open=True)] = 600.0
+    # the fast horizontal alpha-beta filter, on while a horizontal disturbance moves
+    quiet_tau_s: Annotated[float, within(
+        0.002, 60.0, "s: from a fifth of the fastest command period to a minute (the "
+        "integrators' job)")] = 2.0
+    # the horizontal estimate while nothing moves (0.08 Hz): below the position loop's 0.4 Hz
+    # mode, where the accelerometer's noise (vehicle.acc_variance) would add to the hover
+    detect_sigmas: Annotated[float, within(
+        2.0, 20.0, "innovation standard deviations: below 2 the noise switches the fast "
+        "filter on all the time, above 20 a payload would go unseen")] = 4.0
+    # a change is detected beyond this many standard deviations of the noise (Gaussian:
+    # a false switch every ~80 s, each 0.5 s of the fast filter)
+    hold_s: Annotated[float, within(
+        0.0, 10.0, "s: the fast filter's noise for longer than 10 s is the quiet one's job")] \
+        = 0.5
+    # the fast filter stays on this long after the last detection
+    vertical_lead_s: Annotated[float, within(
+        0.0, 1.0, "s: a lead longer than a second extrapolates noise, not a disturbance")] \
+        = 0.07
+    # the thrust takes the vertical estimate this far ahead (estimate + lead x rate): the
+    # input delay, the motors' lag and the loop's response; tuned on gs eval --perturb
+    motor_tau_s: Annotated[float, within(
+        0.0, 1.0, "s: motors slower than a second could not hold a hover")] = 0.02
+    # the lift's lag behind the command in the prediction; thesis silent, 20 ms typical of
+    # the class (sim.motor_tau_s)
+    min_height_m: Annotated[float, within(
+        0.0, 1.0, "m: above a metre the estimate would never learn in a lab")] = 0.01
+    # learns only this far above where the vehicle stood at take-off: below, the floor's
+    # contact force may act, and cancelling it winds up like an integrator
+    limit_m_s2: Annotated[float, within(
+        0.0, 14.0, "m/s^2: the accelerometer's range (vehicle.acc_saturation)",
+        lo_open=True)] = 8.0
+    # clamp per axis: 0.8 g, what a +20 % payload asks on a vehicle whose mass and thrust
+    # map are 15 % off the model and whose battery has lost 10 % (1.2 x 1.15 / 0.85 / 0.9)
+
+
 class LqrFfConfig(ConfigModel):
     """LQR with the feed-forward reference model (beyond the thesis, control/lqr_ff.py),
     designed on the vehicle with its rate loop and command delay. Weights on e = x - x_ref."""
 
-    q_error: Weights4 = Field(default_factory=lambda: [100.0, 100.0, 100.0, 20.0])
+    q_error: Weights4 = Field(default_factory=lambda: [100.0, 100.0, 300.0, 20.0])
     # Q_e on [x, y, z, q3] errors [1/m^2, -]: ~0.8 Hz horizontal bandwidth; tuned for the
-    # worst case of `gs eval --perturb` (rate gains +-30 %, tau +-30 %, delay 5-30 ms)
+    # worst case of `gs eval --perturb` (rate gains +-30 %, tau +-30 %, delay 5-30 ms); z
+    # 300: a +20 % payload peaks 2.3 cm (100: 2.6); 1000 lost the vertical loop with the
+    # external-force estimate on the corner plant (lift 1.35 x the model, delay 30 ms)
     r_input: Weights4 = Field(default_factory=lambda: [1.0, 1.0, 1.0, 0.5])
     # R on [omega_x, omega_y, omega_z, F_z] [1/(rad/s)^2, 1/N^2], tuned with q_error
     q_integral: IntegralWeights4 = Field(default_factory=lambda: [20.0, 20.0, 60.0, 2.0])
@@ -930,6 +982,9 @@ class LqrFfConfig(ConfigModel):
     # thrust-map error, a wrong mass or battery droop (issue 13); 0 turns one off. z is
     # weighted 3x: with mass and thrust map 15 % off, 20 left a 2 cm take-off tail in TRACK
     integral_limit: IntegralLimit = 2.0  # anti-windup clamp on each integrated error [m s]
+    external_force: ExternalForceConfig = ExternalForceConfig()
+    # cancel the external force the accelerometer measures (payload, wind, drag, ground
+    # effect, a sagging battery) within ~0.1 s; the integrators keep what remains
 
 
 class ControllerConfig(ConfigModel):

@@ -49,15 +49,17 @@ from groundstation.control.base import (
     fill_heading_state,
     wrap_angle,
 )
+from groundstation.control.external_force import ExternalForceObserver
 from groundstation.control.lqr_design import design_tracking_lqr, saturate, weight_matrix
 from groundstation.control.sticks import CommandLimits, StickParams
 from groundstation.errors import ControlError
 from groundstation.model import QuadrotorParams
 from groundstation.types import ControlOutput, FloatArray, Reference, StateEstimate
 
-DEFAULT_Q_ERROR = (100.0, 100.0, 100.0, 20.0)
+DEFAULT_Q_ERROR = (100.0, 100.0, 300.0, 20.0)
 """Q_e on the [x, y, z, q3] errors [1/m^2, 1/m^2, 1/m^2, -]: about 0.8 Hz horizontal
-closed-loop bandwidth on the rate-loop model (tuned, see ``gs eval --perturb``)."""
+closed-loop bandwidth on the rate-loop model (tuned, see ``gs eval --perturb``); z 300
+for the payload (``groundstation.config.LqrFfConfig``)."""
 DEFAULT_R_INPUT = (1.0, 1.0, 1.0, 0.5)
 """R on [omega_x, omega_y, omega_z, F_z] [1/(rad/s)^2, 1/(rad/s)^2, 1/(rad/s)^2, 1/N^2]."""
 DEFAULT_Q_INTEGRAL = (20.0, 20.0, 60.0, 2.0)
@@ -90,6 +92,7 @@ class FeedforwardLqr:
         integral_limit: float = 2.0,
         tilt_compensation: bool = True,
         limits: CommandLimits | None = None,
+        external_force: ExternalForceObserver | None = None,
     ) -> None:
         p = params if params is not None else QuadrotorParams()
         self.params = p
@@ -127,12 +130,21 @@ class FeedforwardLqr:
         lim = limits or CommandLimits.from_stick_params(StickParams.from_quadrotor(p))
         self._lo = [*lim.omega_min.tolist(), lim.f_z_min]  # saturation, as Python floats:
         self._hi = [*lim.omega_max.tolist(), lim.f_z_max]  # cheaper than numpy on 4 values
+        self.external_force = external_force
+        """The accelerometer's external-force estimate this controller cancels
+        (:mod:`.external_force`), or None."""
+        self._d = (0.0, 0.0, 0.0)  # its estimate, NED [m/s^2]
+        self._dd = (0.0, 0.0, 0.0)  # and its rate, NED [m/s^3]
+        self._lead_z = 0.0 if external_force is None else external_force.vertical_lead_s
 
     def reset(self) -> None:
-        """Zero the integrators and the input histories."""
+        """Zero the integrators, the input histories and the external-force estimate."""
         self._integral.reset()
         self._history.reset()
         self._ff_history.reset()
+        self._d = self._dd = (0.0, 0.0, 0.0)
+        if self.external_force is not None:
+            self.external_force.reset()
 
     @property
     def integral(self) -> FloatArray:
@@ -146,9 +158,19 @@ class FeedforwardLqr:
         frame = self._frame
         fill_heading_state(frame, estimate, reference, e)  # also updates the frame
         g2 = self._inv_2g
-        # reference tilt, velocity and body rates in the heading frame
+        # reference tilt, velocity and body rates in the heading frame; the tilt is the one
+        # that gives the reference's acceleration less the external one (module doc)
         a0, a1, _a2 = reference.acceleration.tolist()
         j0, j1, _j2 = reference.jerk.tolist()
+        if self.external_force is not None:
+            d0, d1, d2 = self.external_force.update(estimate)
+            r0, r1, r2 = self.external_force.rate
+            self._d = (d0, d1, d2)
+            self._dd = (r0, r1, r2)
+            a0 -= d0
+            a1 -= d1
+            j0 -= r0
+            j1 -= r1
         v0, v1, v2 = reference.velocity.tolist()
         ax, ay = frame.to_heading(a0, a1)
         jx, jy = frame.to_heading(j0, j1)
@@ -179,6 +201,8 @@ class FeedforwardLqr:
         f_lin = self._tilt.linear(output.f_z)
         w = output.omega
         self._history.record(np.array([w[0], w[1], w[2], f_lin]))
+        if self.external_force is not None:
+            self.external_force.sent(output.f_z, automatic)
 
     # ----------------------------------------------------------------- internals
     def _feedforward(self, ahead: Reference, now: Reference) -> FloatArray:
@@ -188,12 +212,18 @@ class FeedforwardLqr:
         psi = frame.yaw + wrap_angle(ahead.yaw - now.yaw)
         c, s = math.cos(psi), math.sin(psi)
         j0, j1, j2 = ahead.jerk.tolist()
+        r0, r1, r2 = self._dd
+        j0 -= r0  # the jerk less the external acceleration's rate (its value ahead: the
+        j1 -= r1  # rate now is the best guess)
         jx = c * j0 + s * j1
         jy = -s * j0 + c * j1
         inv_g = 2.0 * self._inv_2g
         p = self.params
         u = self._u_ff
+        # the thrust acts after the input delay and the motors' lag, and the estimate lags a
+        # step: the vertical external acceleration is taken ahead (see .external_force)
+        d_z = self._d[2] + self._lead_z * r2
         u[:] = (inv_g * jy, -inv_g * jx, ahead.yaw_rate,
-                p.mass * (float(ahead.acceleration[2]) - self.model.rate_tau * j2)
+                p.mass * (float(ahead.acceleration[2]) - self.model.rate_tau * (j2 - r2) - d_z)
                 - p.inflow * float(ahead.velocity[2]))
         return u

@@ -16,6 +16,7 @@ import structlog
 
 from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller
+from groundstation.control.external_force import ExternalForceObserver
 from groundstation.control.feasibility import (
     FeasibilityReport,
     FlightLimits,
@@ -46,7 +47,8 @@ def controller_from_config(config: GroundStationConfig) -> Controller:
     if c.type == "lqr-ff":
         ff = c.lqr_ff
         return FeedforwardLqr(params=params, period=dt, q_error=ff.q_error, r_input=ff.r_input,
-                              q_integral=ff.q_integral, integral_limit=ff.integral_limit)
+                              q_integral=ff.q_integral, integral_limit=ff.integral_limit,
+                              external_force=external_force_from_config(config))
     if c.type in ("lqr-cv", "lqr-cp"):
         lqr = c.lqr
         return LqrController(
@@ -71,6 +73,23 @@ def controller_from_config(config: GroundStationConfig) -> Controller:
         return HinfController(load_hinf_gain(path), params=params, dt=dt,
                               integral_limit=c.hinf.integral_limit)
     raise ConfigError(f"controller.type: {c.type!r}: unknown controller")
+
+
+def external_force_from_config(config: GroundStationConfig) -> ExternalForceObserver | None:
+    """The accelerometer's external-force observer of ``controller.lqr_ff.external_force``
+    (None when disabled), at the command period, with the accelerometer's range."""
+    x = config.controller.lqr_ff.external_force
+    v = config.vehicle.acc_variance
+    if not x.enabled:
+        return None
+    return ExternalForceObserver(
+        quadrotor_params(config), 1.0 / config.serial.command_rate_hz,
+        fast_jerk=x.fast_jerk_m_s4, horizontal_jerk=x.horizontal_jerk_m_s4,
+        quiet_tau_s=x.quiet_tau_s,
+        detect_sigmas=x.detect_sigmas, hold_s=x.hold_s, vertical_lead_s=x.vertical_lead_s,
+        motor_tau_s=x.motor_tau_s, min_height_m=x.min_height_m,
+        acc_variance=(v[0], v[1], v[2]),
+        limit_m_s2=x.limit_m_s2, acc_saturation=config.vehicle.acc_saturation)
 
 
 def flight_limits_from_config(config: GroundStationConfig) -> FlightLimits:
