@@ -142,7 +142,8 @@ def test_calibrate_vicon_recovers_the_noise_and_finds_a_wrong_frame(
     np.testing.assert_allclose(got["vehicle.vicon_quaternion_variance"][1:], VICON_Q_VAR[1:],
                                rtol=rtol)
     assert got["vicon.expected_rate_hz"] == pytest.approx(VICON_RATE, rel=0.02)
-    assert got["frames_dropped"] == 0 and got["frames_ok"]
+    # a datagram may be lost on a loaded machine (UDP), a handful of 800 at most
+    assert got["frames_dropped"] <= 8 and got["frames_ok"]
     # the same lab seen through a wrong body_to_object (identity instead of 180 deg about x)
     wrong = tmp_path / "wrong.yaml"
     wrong.write_text(dump_config(apply_overrides(load_config(ground_file), {

@@ -172,6 +172,7 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
 
 @pytest.mark.realtime
 @pytest.mark.slow
+@pytest.mark.timeout(300)  # two processes of up to 110 s each on a loaded machine
 def test_demo_keeps_the_truth_with_the_log_and_reports_against_it(tmp_path: Path) -> None:
     """`gs fly --demo` (what `make demo` runs): the lab's truth ends up inside the flight's
     directory, and the flight's report is judged against it, not against the estimate."""
