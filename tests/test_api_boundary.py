@@ -162,6 +162,7 @@ def test_the_3000_s_lap_flown_for_a_given_duration_is_accepted_within_the_cap() 
     assert reply["motion"]["duration_s"] <= MAX_MOTION_S
 
 
+@pytest.mark.slow
 # --------------------------------------------------------------------------- the floor
 def test_one_floor_rule_in_the_code_the_refusal_and_the_readme() -> None:
     """The sides and the ceiling keep the margin; the floor has none (a reference may go

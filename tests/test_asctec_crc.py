@@ -60,6 +60,7 @@ def test_worked_frame_crcs(payload_hex: str, crc_bytes_hex: str) -> None:
         assert fn(payload, 0x00FF) == expected
 
 
+@pytest.mark.slow
 @given(data=st.binary(max_size=300), init=st.integers(0, 0xFFFF))
 def test_reference_table_and_fast_path_agree(data: bytes, init: int) -> None:
     expected = crc16_reference(data, init)

@@ -198,6 +198,7 @@ def test_encode_decode_round_trip(msg: Message) -> None:
     assert StreamDecoder().feed(encode_frame(msg)) == [msg]
 
 
+@pytest.mark.slow
 @given(st.lists(messages, max_size=8), st.lists(st.integers(min_value=0), max_size=20))
 def test_stream_split_at_arbitrary_points(msgs: list[Message], cuts: list[int]) -> None:
     stream = b"".join(encode_frame(m) for m in msgs)
@@ -239,6 +240,7 @@ def test_frame_surrounded_by_garbage_is_recovered(
     assert msg in decoded(out)
 
 
+@pytest.mark.slow
 @settings(max_examples=300)
 @given(st.binary(max_size=3000) | garbage, st.lists(st.integers(0), max_size=30))
 def test_random_bytes_never_raise_and_never_pile_up(data: bytes, cuts: list[int]) -> None:
@@ -255,6 +257,7 @@ def test_random_bytes_never_raise_and_never_pile_up(data: bytes, cuts: list[int]
 # --- robustness figure ---------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_corrupted_stream_accepts_no_corrupted_frame_and_recovers_the_rest() -> None:
     """10,000 STATUS+GYRO+ACC DATA frames, 1% of the bytes XORed with a random
     non-zero value (seed 3). Counters are unique (< 65536), so an accepted message

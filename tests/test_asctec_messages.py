@@ -255,6 +255,7 @@ def test_messages_are_frozen_and_slotted() -> None:
     assert not hasattr(msg, "__dict__")
 
 
+@pytest.mark.slow
 @given(messages)
 def test_payload_round_trip(msg: Message) -> None:
     payload = msg.pack()

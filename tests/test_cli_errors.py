@@ -38,12 +38,14 @@ def _one_error_line(run: subprocess.CompletedProcess[str], *names: str) -> str:
     return lines[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["export", "report", "replay", "verify-model"])
 def test_a_flight_log_that_is_not_there_exits_2_naming_it(command: str) -> None:
     line = _one_error_line(_gs(command, "no/such/log"), "no/such/log: no such flight log")
     assert "Errno" not in line
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["directory", "file"])
 def test_something_that_is_not_a_flight_log_exits_2_naming_it(tmp_path: Path,
                                                               kind: str) -> None:
@@ -57,6 +59,7 @@ def test_something_that_is_not_a_flight_log_exits_2_naming_it(tmp_path: Path,
     assert "Errno" not in line and "flight.npy'" not in line
 
 
+@pytest.mark.slow
 def test_a_truth_file_that_is_not_there_exits_2_naming_it(tmp_path: Path) -> None:
     log = empty_log(tmp_path / "logs")
     missing = tmp_path / "none.npz"
@@ -97,6 +100,7 @@ def _line_of(text: str, key: str) -> int:
                 if line.strip().startswith(f"{key}:"))
 
 
+@pytest.mark.slow
 def test_an_impossible_mass_is_reported_as_the_mass_with_its_line(tmp_path: Path) -> None:
     path = tmp_path / "lab.yaml"
     path.write_text(HEAVY)
@@ -107,6 +111,7 @@ def test_an_impossible_mass_is_reported_as_the_mass_with_its_line(tmp_path: Path
     assert f"weighs {6.0 * 9.81:.2f} N" in line
 
 
+@pytest.mark.slow
 def test_a_thrust_map_too_weak_for_the_default_mass_is_the_thrust_maps(tmp_path: Path) -> None:
     text = "vehicle:\n  thrust_poly: [0.0, 0.0, -0.001, 0.0]  # a stand with a weak motor\n"
     path = tmp_path / "weak.yaml"
@@ -115,6 +120,7 @@ def test_a_thrust_map_too_weak_for_the_default_mass_is_the_thrust_maps(tmp_path:
                     "could not hover")
 
 
+@pytest.mark.slow
 def test_check_config_gives_one_line_per_problem_with_its_line_then_the_verdict(
         tmp_path: Path) -> None:
     path = tmp_path / "lab.yaml"
@@ -133,6 +139,7 @@ def test_check_config_gives_one_line_per_problem_with_its_line_then_the_verdict(
     assert lines[-1] == f"{path}: invalid, {len(expected)} problems"
 
 
+@pytest.mark.slow
 def test_check_config_on_a_good_file_is_one_verdict_line(tmp_path: Path) -> None:
     for args in (["config/sim.yaml"], ["--config", "config/sim.yaml"], ["-c", "config/sim.yaml"]):
         run = _gs("check-config", *args)
@@ -142,6 +149,7 @@ def test_check_config_on_a_good_file_is_one_verdict_line(tmp_path: Path) -> None
         assert "trajectory square" in lines[0] and "flyable" in lines[0]
 
 
+@pytest.mark.slow
 def test_check_config_show_prints_the_configuration_and_ends_with_the_verdict() -> None:
     run = _gs("check-config", "--show", "-c", "config/sim.yaml")
     assert run.returncode == 0, run.stderr
@@ -151,6 +159,7 @@ def test_check_config_show_prints_the_configuration_and_ends_with_the_verdict() 
     assert re.fullmatch(r"# config/sim\.yaml: valid: .*", run.stdout.splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_check_config_refuses_two_different_files() -> None:
     _one_error_line(_gs("check-config", "config/sim.yaml", "--config", "config/lab.yaml"),
                     "two configurations given")

@@ -130,6 +130,7 @@ def test_every_eval_scenario_channel_and_axis_is_listed() -> None:
     _words_listed(["identify", "scales"], list(SCALE_AXES))
 
 
+@pytest.mark.slow
 def test_the_help_a_user_runs_keeps_the_words_rich_markup_ate() -> None:
     """The console script in a terminal 80 columns wide, as the issue's findings were made:
     `[hinf]`, the units of `gs goto`'s arguments, `[counts]`."""

@@ -125,6 +125,7 @@ def test_the_token_scan_ignores_comments_and_finds_numbers(tmp_path: Path) -> No
     assert _number_tokens(source) == [("9.82", 1), ("1000", 3)]
 
 
+@pytest.mark.slow
 def test_the_gravity_check_key_reaches_the_estimator() -> None:
     base = load_config(ROOT / "config" / "sim.yaml")
     data = base.model_dump(mode="json")

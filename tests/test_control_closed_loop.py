@@ -35,6 +35,7 @@ FACTORIES: dict[str, Callable[[], Controller]] = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(FACTORIES))
 def test_each_controller_recovers_and_holds_hover(name: str) -> None:
     x0 = np.zeros(10)
@@ -55,6 +56,7 @@ STEP_LIMITS = {  # (axis, rise [s], settling [s], overshoot) limits; reached val
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "traj"), list(STEP_LIMITS))
 def test_step_responses(name: str, traj: str) -> None:
     axis = {"step-x": 0, "step-z": 2}[traj]

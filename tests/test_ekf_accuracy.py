@@ -75,6 +75,7 @@ def test_nis_and_nees_are_chi_square_consistent() -> None:
     assert lo < sub.mean() < hi
 
 
+@pytest.mark.slow
 def test_bias_settles_on_the_ground() -> None:
     # Thesis Ch. 7.4: the gyro bias needs ~3 s with the vehicle still on the ground.
     bg, ba = np.array(BIASED.gyro_bias), np.array(BIASED.acc_bias)

@@ -54,6 +54,7 @@ def test_one_second_outage_has_bounded_error_growth(seed: int) -> None:
     assert tr.reasons.count("ok") == len(tr.reasons)
 
 
+@pytest.mark.slow
 def test_outage_visible_in_health() -> None:
     ekf, sim = _started(steps=200)
     tr0 = ekf.health().covariance_trace
@@ -66,6 +67,7 @@ def test_outage_visible_in_health() -> None:
     assert not h.diverged
 
 
+@pytest.mark.slow
 def test_outlier_is_gated_counted_and_does_not_move_the_estimate() -> None:
     ekf, sim = _started()
     sim.step()
@@ -122,6 +124,7 @@ def test_persistent_gating_resets_to_vicon() -> None:
     assert np.linalg.norm(ekf.state[0:3] - sim.x[0:3]) < 2e-3
 
 
+@pytest.mark.slow
 def test_an_unexplained_start_is_overruled_by_the_poses_after_evidence_after() -> None:
     # 0.5 m between Vicon and the estimate is more than the IMU may have missed (5.3 sigma
     # of reset_position_sigma = 4 cm is 21 cm), so it is no ordinary reset; but the poses
@@ -197,6 +200,7 @@ def _jump_after_a_gap(gap_s: float, n: int) -> tuple[Ekf, TruthSimulator, list[U
     return ekf, sim, reasons
 
 
+@pytest.mark.slow
 def test_a_consistent_jump_the_imu_did_not_see_outranks_the_estimate() -> None:
     """After a 1 s gap, poses 30 cm off that stay consistent. The IMU saw the vehicle fly
     the square, so the jump is far more than a missed velocity explains and no ordinary
@@ -212,6 +216,7 @@ def test_a_consistent_jump_the_imu_did_not_see_outranks_the_estimate() -> None:
     assert abs(offset[0] - 0.3) < 0.02 and np.linalg.norm(offset[1:]) < 0.02
 
 
+@pytest.mark.slow
 def test_a_jump_the_dead_reckoned_covariance_covers_is_an_ordinary_reset() -> None:
     """The other side of the bound, which grows with the time since the last fix: a 5 cm
     jump after 1.5 s of dead reckoning is what the IMU may have missed: re-anchored at
@@ -229,6 +234,7 @@ def test_a_jump_the_dead_reckoned_covariance_covers_is_an_ordinary_reset() -> No
     assert ekf.overruled[0] == 0 and ekf.health().forced_resets == 0
 
 
+@pytest.mark.slow
 def test_a_wrong_pose_between_true_ones_never_overrules_the_estimate() -> None:
     """A reflection or a second sender whose poses come between the true ones: each true
     pose is fused and clears the run of candidates, so no forced reset happens however
@@ -245,6 +251,7 @@ def test_a_wrong_pose_between_true_ones_never_overrules_the_estimate() -> None:
     assert ekf.overruled[0] == 0 and ekf.health().resets == 0
 
 
+@pytest.mark.slow
 def test_a_reset_needs_poses_that_agree_with_each_other() -> None:
     """Issue 14: after a gap, poses alternately 15 cm either side of the truth. Each is
     within what the IMU may have missed, but no two in a row agree (30 cm in 10 ms is
@@ -262,6 +269,7 @@ def test_a_reset_needs_poses_that_agree_with_each_other() -> None:
     assert np.linalg.norm(ekf.state[0:3] - sim.x[0:3]) < 0.04
 
 
+@pytest.mark.slow
 def test_repeated_samples_are_ignored() -> None:
     ekf, sim = _started()
     sim.step()
@@ -283,6 +291,7 @@ def test_repeated_samples_are_ignored() -> None:
     assert (h.repeated_imu, h.repeated_poses) == (2, 2)
 
 
+@pytest.mark.slow
 def test_an_identity_attitude_is_a_pose_like_any_other() -> None:
     """Algorithm 2's lost-tracking encodings are the pose filter's to recognise, on the raw
     values (a held translation): to the filter an identity attitude is a level vehicle at
@@ -322,6 +331,7 @@ def _recorded(n: int, seed: int = 6) -> tuple[list[ImuSample], list[Pose]]:
     return imus, poses
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("delay", [1, 4, 15])
 def test_late_pose_equals_in_order_pose(delay: int) -> None:
     # In order: each pose (stamped 3.7 ms after its IMU sample) is handed over before the
@@ -412,6 +422,7 @@ def test_gravity_check_catches_a_wrong_frame(what: str, expect_ok: bool) -> None
         np.testing.assert_array_equal(report.acc_bias, 0.0)  # not learnt from bad data
 
 
+@pytest.mark.slow
 def test_covariance_stays_symmetric_positive_definite_and_quaternion_unit() -> None:
     ekf, _ = _started(steps=300)
     P = ekf.error_covariance
@@ -462,6 +473,7 @@ def test_estimate_record_matches_state() -> None:
     assert est.t == imu.t
 
 
+@pytest.mark.slow
 def test_imu_gap_is_sub_stepped() -> None:
     # 0.1 s without IMU data (e.g. a radio drop-out): the next sample is integrated in
     # sub-steps of at most max_step with the input interpolated, and Vicon pulls it back.
@@ -514,6 +526,7 @@ def test_velocity_error_the_imu_did_not_see_is_corrected_quickly() -> None:
     assert ekf.health().resets >= 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gap", [1, 4])  # one sample ahead; 40 ms ahead (sub-stepped)
 def test_estimate_ahead_is_the_prediction_without_moving_the_filter(gap: int) -> None:
     """``estimate_ahead`` must give exactly the nominal state ``predict`` would reach (the
@@ -552,6 +565,7 @@ def test_estimate_ahead_of_a_sample_predict_would_skip_is_the_estimate() -> None
     assert ekf.health().invalid_imu == 0  # counted when predict sees it, not here
 
 
+@pytest.mark.slow
 def test_late_poses_are_counted() -> None:
     imus, poses = _recorded(40)
     ekf = Ekf()

@@ -104,6 +104,7 @@ def test_rk4_propagation_converges_at_fourth_order() -> None:
     assert np.linalg.norm(run(1)[3:7]) == pytest.approx(1.0, abs=1e-15)
 
 
+@pytest.mark.slow
 def test_noise_free_estimate_follows_truth_without_vicon() -> None:
     # With perfect IMU data the prediction alone must reproduce the truth simulator
     # (same nonlinear model, inputs linear between samples) for 10 s of the square.

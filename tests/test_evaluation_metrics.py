@@ -42,6 +42,7 @@ def circle(t: np.ndarray, period: float = 20.0, radius: float = 0.4) -> np.ndarr
     return np.column_stack([radius * np.cos(w * t), radius * np.sin(w * t), -np.ones_like(t)])
 
 
+@pytest.mark.slow
 def test_pure_delay_of_half_a_second_gives_lag_half_a_second() -> None:
     t = np.arange(0.0, 60.0, 0.01)
     ref = circle(t)
@@ -51,6 +52,7 @@ def test_pure_delay_of_half_a_second_gives_lag_half_a_second() -> None:
     assert lag_s(t, ref, ref) == pytest.approx(0.0, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_lag_resolves_below_one_sample_by_parabolic_interpolation() -> None:
     t = np.arange(0.0, 60.0, 0.01)
     lag = lag_s(t, circle(t - 0.234), circle(t))  # 23.4 samples

@@ -48,6 +48,7 @@ def record(t: np.ndarray, ref: np.ndarray, pos: np.ndarray, *, yaw_true: np.ndar
                         ref_yaw=ref_yaw)
 
 
+@pytest.mark.slow
 def test_late_on_the_path_is_off_in_time_but_not_off_the_path() -> None:
     t = np.arange(0.0, 60.0, 0.01)
     delay = 0.2

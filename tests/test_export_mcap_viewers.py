@@ -75,6 +75,7 @@ def test_the_port_of_lichtblicks_parser_refuses_what_lichtblick_refused() -> Non
             "m": {"type": "array", "items": {"type": "array"}}}})
 
 
+@pytest.mark.slow
 def test_every_json_channel_has_a_schema_the_viewers_parse(exported: tuple[Path, Path]
                                                            ) -> None:
     channels, messages = _read(exported[1])
@@ -88,6 +89,7 @@ def test_every_json_channel_has_a_schema_the_viewers_parse(exported: tuple[Path,
         assert set(body) == fields, topic  # every field the message has, the schema names
 
 
+@pytest.mark.slow
 def test_the_3d_channels_are_foxgloves_protobuf_schemas(exported: tuple[Path, Path]) -> None:
     channels, messages = _read(exported[1])
     rows = read_flight(exported[0])[0]
@@ -110,6 +112,7 @@ def _quaternion(d: dict[str, Any]) -> Rotation:
     return Rotation.from_quat([d.get(k, 0.0) for k in "xyzw"])  # scipy: scalar last
 
 
+@pytest.mark.slow
 def test_tf_puts_the_flight_above_the_grid_and_the_body_at_the_estimate(
         exported: tuple[Path, Path]) -> None:
     channels, messages = _read(exported[1])
@@ -138,6 +141,7 @@ def test_tf_puts_the_flight_above_the_grid_and_the_body_at_the_estimate(
     assert len(hovering) > 100 and (world.apply(hovering)[:, 2] > 0.5).all()
 
 
+@pytest.mark.slow
 def test_the_poses_and_their_times_are_the_logs(exported: tuple[Path, Path]) -> None:
     channels, messages = _read(exported[1])
     rows = read_flight(exported[0])[0]
@@ -155,6 +159,7 @@ def test_the_poses_and_their_times_are_the_logs(exported: tuple[Path, Path]) -> 
         assert stamp.get("seconds", 0) * 10**9 + stamp.get("nanos", 0) == log_time
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("rerun", path=str(Path(sys.executable).parent)) is None,
                     reason="rerun-sdk (the dev extra) is not installed")
 def test_rerun_reads_the_poses_and_transforms_as_3d_data(exported: tuple[Path, Path],

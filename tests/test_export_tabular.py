@@ -132,6 +132,7 @@ def test_numpy_reads_the_csv_too(log: Path, tmp_path: Path) -> None:
                                atol=5e-4)
 
 
+@pytest.mark.slow
 def test_missing_values_are_empty_fields(log: Path) -> None:
     stream = io.StringIO()
     export_csv(log, stream)

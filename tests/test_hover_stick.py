@@ -51,6 +51,7 @@ def test_sticks_that_cannot_hover_are_refused() -> None:
         thrust_from_hover_stick(2000.0, mass_kg=MASS, gravity=G, thrust_poly=upside_down)
 
 
+@pytest.mark.slow
 def test_the_command_prints_the_field_to_paste(tmp_path: Path) -> None:
     runner = CliRunner()
     stick = true_hover_stick(0.8)
@@ -82,6 +83,7 @@ def _sag(model: list[float]) -> float:
                         - result.trace["ref_pos"][climbing, 2]))  # NED: + is below
 
 
+@pytest.mark.slow
 def test_the_first_map_takes_off_on_its_reference() -> None:
     fit = thrust_from_hover_stick(true_hover_stick(TRUE_LIFT), mass_kg=MASS, gravity=G,
                                   thrust_poly=POLY)

@@ -39,6 +39,7 @@ LIMITS = FlightLimits(gravity=G, max_tilt_rad=math.radians(20.0), max_rate_rad_s
 TRUE_OVER_MODEL = [1.3, 0.7, 1.3]  # the virtual vehicle's rate gains / the configured ones
 
 
+@pytest.mark.slow
 def test_doublets_match_their_closed_forms() -> None:
     heading = math.radians(30.0)
     traj = identification_flight([0.2, -0.1, -1.0], heading, LIMITS, LAB, 0.064)
@@ -121,6 +122,7 @@ def flown(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, FlightResult]
                       .duration_s)
 
 
+@pytest.mark.slow
 def test_the_gains_are_found_within_5_percent_of_the_truth(
         flown: tuple[Path, FlightResult]) -> None:
     log, result = flown
@@ -147,6 +149,7 @@ def test_the_gains_are_found_within_5_percent_of_the_truth(
     assert np.all(arrays["position"] >= lo - 0.1) and np.all(arrays["position"] <= hi + 0.1)
 
 
+@pytest.mark.slow
 def test_every_identification_it_is_recommended_for_accepts_its_log(
         flown: tuple[Path, FlightResult]) -> None:
     log, _ = flown
@@ -160,6 +163,7 @@ def test_every_identification_it_is_recommended_for_accepts_its_log(
     assert inflow.inflow < 0.0
 
 
+@pytest.mark.slow
 def test_a_hover_is_refused_with_the_flight_that_is_not(tmp_path: Path) -> None:
     log, _ = fly_logged(sim_config(**{"trajectory.name": "hover"}), tmp_path, 6.0)
     # (the inflow and the thrust map are found even in a hover's take-off and landing)

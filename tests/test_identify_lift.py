@@ -40,6 +40,7 @@ def climbs(tmp_path_factory: pytest.TempPathFactory) -> Path:
                                  "trajectory.file": str(tmp / "climbs.csv")}, 14.0)
 
 
+@pytest.mark.slow
 def test_thrust_scale_and_inflow_are_recovered(climbs: Path) -> None:
     thrust = identify_thrust_log(climbs)
     assert thrust.scale == pytest.approx(THRUST_SCALE, rel=0.02)
@@ -49,6 +50,7 @@ def test_thrust_scale_and_inflow_are_recovered(climbs: Path) -> None:
     assert abs(inflow.inflow - INFLOW) < abs(-0.423 - INFLOW)  # nearer the truth than the default
 
 
+@pytest.mark.slow
 def test_the_commands_take_a_log_and_still_a_csv(climbs: Path, tmp_path: Path) -> None:
     def gs(*args: str) -> subprocess.CompletedProcess[str]:
         return subprocess.run([sys.executable, "-m", "groundstation", *args],

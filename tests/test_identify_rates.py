@@ -52,6 +52,7 @@ def lab_of(result: FlightResult) -> VirtualLab:
     return result.lab
 
 
+@pytest.mark.slow
 def test_rates_recover_the_planted_gain_delay_and_time_constant(
         lively: tuple[Path, FlightResult], tmp_path: Path) -> None:
     log, result = lively
@@ -114,6 +115,7 @@ def test_rates_recover_the_planted_gain_delay_and_time_constant(
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow
 def test_rates_of_some_axes_keep_the_configured_rest(
         lively: tuple[Path, FlightResult]) -> None:
     log, _ = lively
@@ -143,6 +145,7 @@ def test_rates_refuse_a_short_log(lively: tuple[Path, FlightResult], tmp_path: P
         identify_rates(short)
 
 
+@pytest.mark.slow
 def test_rates_refuse_a_hover_and_what_is_no_flight_log(tmp_path: Path) -> None:
     log, _ = fly_logged(sim_config(**{"trajectory.name": "hover", **PLANTED}),
                         tmp_path / "logs", 6.0)
@@ -156,6 +159,7 @@ def test_rates_refuse_a_hover_and_what_is_no_flight_log(tmp_path: Path) -> None:
         identify_rates(tmp_path / "empty")
 
 
+@pytest.mark.slow
 def test_gs_identify_rates_and_scales_print_config_fields(
         lively: tuple[Path, FlightResult], tmp_path: Path) -> None:
     """The commands on the same log: JSON keyed by the configuration's field names (the

@@ -37,6 +37,7 @@ def _imported_modules(path: Path) -> set[str]:
     return names
 
 
+@pytest.mark.slow
 def test_no_groundstation_module_imports_the_lab() -> None:
     offenders = [f"{path.relative_to(ROOT)}: {name}"
                  for path in sorted((ROOT / "groundstation").rglob("*.py"))
@@ -68,6 +69,7 @@ print("\n".join(failed) if failed else "ok")
 """
 
 
+@pytest.mark.slow
 def test_every_module_imports_without_the_lab() -> None:
     out = subprocess.run([sys.executable, "-c", _WITHOUT_LAB], capture_output=True, text=True,
                          timeout=120, cwd=ROOT)
@@ -82,6 +84,7 @@ def _gs_without_lab(*args: str) -> subprocess.CompletedProcess[str]:
                           timeout=120, cwd=ROOT, env={**os.environ, "COLUMNS": "120"})
 
 
+@pytest.mark.slow
 def test_gs_without_the_lab_flies_but_has_no_lab_commands() -> None:
     helped = _gs_without_lab("--help")
     assert helped.returncode == 0, helped.stderr
@@ -91,6 +94,7 @@ def test_gs_without_the_lab_flies_but_has_no_lab_commands() -> None:
     assert checked.returncode == 0, checked.stderr
 
 
+@pytest.mark.slow
 def test_a_sim_section_without_the_lab_is_a_config_error() -> None:
     out = _gs_without_lab("check-config", str(ROOT / "config" / "sim.yaml"))
     assert out.returncode == 2

@@ -163,6 +163,7 @@ def quaternion_line(q: list[float]) -> list[float]:
 unit = st.floats(-1.0, 1.0, allow_nan=False)
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore:Gimbal lock")  # such cases are skipped below
 @given(st.lists(unit, min_size=4, max_size=4), st.floats(1e-3, 1e3))
 def test_attitude_matches_scipy(q: list[float], scale: float) -> None:
@@ -233,6 +234,7 @@ def well_formed(lines: list[str], width: int = WIDTH) -> None:
         assert all(" " <= c <= "~" for c in text_line), repr(text_line)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(states, healths, text, st.one_of(st.integers(), huge),
        st.one_of(st.none(), st.floats(allow_nan=True, allow_infinity=True)))
@@ -292,6 +294,7 @@ def feed(pub: TelemetryPublisher) -> Iterator[Feed]:
         thread.join()
 
 
+@pytest.mark.slow
 def test_run_monitor_redraws_in_place(
     pub: TelemetryPublisher, feed: Feed,
 ) -> None:
@@ -306,6 +309,7 @@ def test_run_monitor_redraws_in_place(
     well_formed(re.sub(r"\x1b\[\d*[A-Za-z]", "", text).splitlines())
 
 
+@pytest.mark.slow
 def test_piped_output_is_plain_status_lines(
     pub: TelemetryPublisher, feed: Feed,
 ) -> None:
@@ -351,6 +355,7 @@ def test_cli_monitor_exits_0_at_the_final_state(
     assert result.output.splitlines()[-1].startswith("ENDED  DONE (COMPLETED)")
 
 
+@pytest.mark.slow
 def test_no_messages_keeps_showing_stale(pub: TelemetryPublisher, feed: Feed) -> None:
     out = io.StringIO()
     feed(lambda: "TRACK" in out.getvalue(), final=False)  # then silence, no final state
@@ -367,6 +372,7 @@ _MONITOR = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_monitor_stops_cleanly_on_ctrl_c(pub: TelemetryPublisher) -> None:
     proc = subprocess.Popen([sys.executable, "-c", _MONITOR, pub.endpoint or ""],
                             stdout=subprocess.PIPE, text=True)

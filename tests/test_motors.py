@@ -68,6 +68,7 @@ def test_the_x3d_dialect_has_no_gesture(ll_lab: tuple[Path, str]) -> None:
     assert "no motor gesture" in out.stdout
 
 
+@pytest.mark.slow
 def test_bad_action_is_a_usage_error(tmp_path: Path) -> None:
     out = gs("motors", "spin", "--config", str(ROOT / "config" / "sim.yaml"))
     assert out.returncode == 2 and "start or stop" in out.stderr

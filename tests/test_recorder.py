@@ -105,6 +105,7 @@ def assert_rows(data: np.ndarray, ticks: list[dict[str, Any]]) -> None:
             np.testing.assert_array_equal(row[name], value, err_msg=name)  # NaN == NaN here
 
 
+@pytest.mark.slow
 def test_round_trip_every_field(tmp_path: Path) -> None:
     rng = np.random.default_rng(1)
     ticks = [make_tick(rng, k) for k in range(250)]
@@ -163,6 +164,7 @@ def test_np_load_works_after_every_flush(tmp_path: Path) -> None:
     assert len(np.load(rec.path)) == 40  # ...written by close()
 
 
+@pytest.mark.slow
 def test_automatic_flush_keeps_at_most_one_second_in_memory(tmp_path: Path) -> None:
     rng = np.random.default_rng(4)
     with FlightRecorder.create(tmp_path, CONFIG, flush_interval_s=1.0) as rec:
@@ -191,6 +193,7 @@ _KILLED_WRITER = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_sigkill_leaves_a_loadable_file_with_the_flushed_rows(tmp_path: Path) -> None:
     proc = subprocess.Popen(
         [sys.executable, "-c", _KILLED_WRITER, str(tmp_path), str(Path(__file__).parent)],

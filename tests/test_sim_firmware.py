@@ -153,6 +153,7 @@ def _acc_and_gyro_si(msgs: list[tuple[float, DataMsg]]) -> tuple[np.ndarray, np.
     return np.array(acc), np.array(gyro)
 
 
+@pytest.mark.slow
 def test_imu_at_rest_reads_gravity_with_table_6_3_noise() -> None:
     clean = ImuParams(gyro_bias=(0.0, 0.0, 0.0), acc_bias=(0.0, 0.0, 0.0), scale_error=0.0)
     lab = make_lab(imu=clean)
@@ -169,6 +170,7 @@ def test_imu_at_rest_reads_gravity_with_table_6_3_noise() -> None:
                                + k_gyro**2 / 12, rtol=0.15)
 
 
+@pytest.mark.slow
 def test_imu_bias_and_scale_error_show_in_the_mean() -> None:
     lab = make_lab()  # default biases and up to 2 % scale error
     lab.send(ConfigMsg(0x07, 10))

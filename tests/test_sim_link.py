@@ -56,6 +56,7 @@ def test_fitting_selection_keeps_full_rate_at_low_baud() -> None:
     assert len(frames) == pytest.approx(3.0 / 0.030, abs=1)
 
 
+@pytest.mark.slow
 def test_dropped_frames_leave_counter_gaps() -> None:
     lab = streaming_lab(drop_rate=0.3)
     before = lab.stats()
@@ -69,6 +70,7 @@ def test_dropped_frames_leave_counter_gaps() -> None:
         stats.data_sent - before.data_sent)
 
 
+@pytest.mark.slow
 def test_byte_corruption_rate_matches_rejected_frames() -> None:
     p = 2e-3
     lab = streaming_lab(corruption_rate=p)

@@ -78,6 +78,7 @@ def arrival_step(t_write: float, size: int) -> float:
     return math.ceil((t_write + size * BYTE + DELAY) / DT - 1e-9) * DT
 
 
+@pytest.mark.slow
 def test_poll_is_answered_by_exactly_the_requested_packets_at_the_baud() -> None:
     lab = VirtualLab(ll_config())
     assert isinstance(lab.firmware, LlFirmware) and lab.firmware.next_sample_ns is None

@@ -29,6 +29,7 @@ def eight_csv(path: Path, period: float, hz: float = 50.0) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_a_dense_file_is_described_checked_and_drawn(tmp_path: Path) -> None:
     csv = eight_csv(tmp_path / "eight.csv", 8.0)
     png = tmp_path / "eight.png"

@@ -45,6 +45,7 @@ class Opaque:
         return self.inner.sample(t)  # type: ignore[attr-defined,no-any-return]
 
 
+@pytest.mark.slow
 def test_a_dense_file_flown_as_corners_is_refused_between_its_knots() -> None:
     """The dense noisy eight flown as rest-to-rest corners: at the knots (every 10 ms)
     it is at rest, so a check that samples there passes it; between them every hop asks
@@ -202,6 +203,7 @@ def test_check_config_refuses_a_figure_eight_faster_than_a_tick(tmp_path: Path) 
     assert "Traceback" not in result.output
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3, 4])
 def test_every_peak_is_the_curves_own_on_random_polynomial_segments(seed: int) -> None:
     """Random septic segments (continuous or not): each peak the check reports is within

@@ -106,6 +106,7 @@ def refusal(cfg: GroundStationConfig) -> str:
     return str(info.value)
 
 
+@pytest.mark.slow
 def test_every_named_trajectory_is_shaped_and_passes_with_the_defaults() -> None:
     for name in ("hover", "step-x", "step-y", "step-z", "square", "yz-rectangle", "low-hover",
                  "figure-eight", "yaw-turn"):

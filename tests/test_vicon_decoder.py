@@ -164,6 +164,7 @@ def test_encoder_matches_hand_built_bytes() -> None:
     assert encode_datagram(4242, [obj]) == body + bytes(1024 - len(body))
 
 
+@pytest.mark.slow
 @given(st.integers(0, 2**32 - 1), st.lists(objects, max_size=13))
 def test_round_trip(frame: int, objs: list[ObjectPose]) -> None:
     # 13 objects: 5 + 13 * 75 = 980 bytes, the most that fit a 1024-byte block.

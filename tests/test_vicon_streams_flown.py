@@ -61,6 +61,7 @@ def test_a_stream_that_starts_while_the_object_is_occluded_flies_once_it_is_seen
     assert seen.lost_zero + seen.lost_held_identity > 300  # 4 s of it at 100 Hz, refused
 
 
+@pytest.mark.slow
 def test_a_vicon_preflight_failure_says_what_the_filter_saw() -> None:
     """Nothing but the lost-tracking encoding for the whole preflight: the abort names
     what arrived and why it was refused, not 'Vicon at 0 Hz' alone."""
