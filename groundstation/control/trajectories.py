@@ -31,7 +31,12 @@ from groundstation.control.trajectory import (
     YawTurn,
 )
 from groundstation.errors import TrajectoryError
+from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.types import FloatArray
+
+_VEHICLE = QuadrotorParams()
+"""The vehicle model's defaults (the rate loop's time constant of the identification
+flight's pulses)."""
 
 if TYPE_CHECKING:
     from groundstation.config import TrajectoryConfig
@@ -197,7 +202,7 @@ def make_trajectory(
     relative: bool = True,
     limits: FlightLimits | None = None,
     volume: Volume | None = None,
-    rate_tau_s: float = 0.064,
+    rate_tau_s: float = _VEHICLE.rate_tau,
 ) -> Trajectory:
     """Build a named trajectory (the names of ``TrajectoryConfig.name``).
 
