@@ -153,7 +153,8 @@ def test_every_command_that_reads_a_config_refuses_a_nul_byte_in_one_line(
         argv = list(words)
         for param in command.params:  # placeholders for what each command requires
             if param.required and param.name != "config":
-                value = "start" if param.name == "action" else str(tmp_path / "out")
+                value = {"action": "start", "stick": "1500"}.get(  # the numeric ones
+                    param.name or "", str(tmp_path / "out"))
                 argv += [value] if param.param_type_name == "argument" else \
                     [f"--{param.name.replace('_', '-')}", value]
         result = CliRunner().invoke(app, [*argv, "--config", str(path)])
