@@ -58,10 +58,11 @@ DEFAULT_TIMEOUT_S = 3.0
 has the same default)."""
 POLL_S = 0.05
 """How often the blocking helpers ask for the status [s]."""
-PLAN_WAIT_S = 10.0
+PLAN_WAIT_S = 20.0
 """How much longer than ``timeout_s`` a motion request waits for its reply [s]: the
 daemon answers once the motion is planned, within its ``api.plan_timeout_s`` (5 s by
-default), and refuses it otherwise."""
+default) after its planner process is ready (a start still under way may take up to
+10 s more on a busy machine), and refuses it otherwise."""
 FAILSAFE_STATES = frozenset({"HOLD", "HANDBACK", "LINK_LOST", "ABORTED"})
 """States a failsafe puts the flight in (a landing may be one too: see ``reason``)."""
 ENDED_STATES = frozenset({"DONE", "HANDBACK", "LINK_LOST", "ABORTED"})

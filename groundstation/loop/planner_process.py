@@ -51,9 +51,15 @@ from groundstation.loop.planner import PlanJob, PlannerSettings
 
 log = structlog.get_logger(__name__)
 
-PLANNER_NICE = 10
+PLANNER_NICE = 5
 """The planner's nice increment: on a loaded machine a plan waits for the daemon's threads,
-never the other way round (the flight loop also runs ``SCHED_FIFO`` when it may)."""
+never the other way round (the flight loop also runs ``SCHED_FIFO`` when it may). Five,
+not more: at 10 a machine busy with other work (a CI runner) starved the planner's start
+for longer than a take-off, and the first motion was refused as busy."""
+
+START_WAIT_S = 10.0
+"""How long a request waits for a planner that is still starting [s], beyond its own
+planning budget (which starts once the planner is ready): an import under load."""
 
 STOP_WAIT_S = 1.0
 """How long :meth:`PlannerProcess.close` lets the process end by itself before killing it
@@ -126,8 +132,9 @@ class PlannerProcess:
     def run(self, job: PlanJob, deadline: float) -> Any:
         """``job``'s result, computed in the planner process. Raises CommandRefusedError:
         the job's own refusal; ``infeasible`` if it is not done by ``deadline``
-        (``time.monotonic()`` [s]; the process is then restarted); ``busy`` if the process
-        is still starting at the deadline; ``internal`` if it failed or died."""
+        (``time.monotonic()`` [s]; the process is then restarted; a start the request had
+        to wait for does not count against it); ``busy`` if the process is still starting
+        :data:`START_WAIT_S` after the request; ``internal`` if it failed or died."""
         with self._lock:
             if not self._open:
                 raise CommandRefusedError("internal", "the planner process is not running")
@@ -136,8 +143,9 @@ class PlannerProcess:
                 if self._conn is None:
                     raise CommandRefusedError("internal", "the planner process cannot be "
                                               "started (see the daemon's log)")
-            if not self._ready:
-                self._await_ready(deadline)
+            if not self._ready:  # the start does not count against the plan's budget
+                self._await_ready(max(deadline, time.monotonic() + START_WAIT_S))
+                deadline = max(deadline, time.monotonic() + self._timeout_s)
             self._seq += 1
             try:
                 self._conn.send((self._seq, job))
