@@ -15,6 +15,9 @@
 * Hypothesis runs derandomized and without its wall-clock deadline: a property test
   draws the same examples on every run (a pass cannot depend on the draw), and a loaded
   machine cannot fail it.
+* structlog's configuration is put back after every test (``fresh_logging``): a command
+  run in-process configures it (level, output), and a later test on the same worker that
+  captures log events would otherwise see only those at the level that command set.
 """
 
 from __future__ import annotations
@@ -195,3 +198,13 @@ def no_leaks() -> Iterator[None]:
 def repo() -> Path:
     """The repository root."""
     return REPO
+
+
+@pytest.fixture(autouse=True)
+def fresh_logging() -> Iterator[None]:
+    """structlog's defaults before and after each test (see the module docstring)."""
+    import structlog
+
+    structlog.reset_defaults()
+    yield
+    structlog.reset_defaults()
