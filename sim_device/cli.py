@@ -34,6 +34,16 @@ SCENARIO_NAMES = (
     "square-shaped-lqr-cp", "square-shaped-lqr-cv", "takeoff-h135", "hover-h90", "hover-h180",
     "hover-h270", "hinf-rate-gains-low", "hinf-rate-gains-high", "file-eight-8s",
     "file-eight-4s", "file-figure8", "hover-exact-angles",
+    "payload-hover-lqr-ff", "payload-eight-lqr-ff", "wind-hover-lqr-ff",
+    "gust-hover-lqr-ff", "battery-sag-lqr-ff", "ground-effect-lqr-ff",
+    "payload-hover-lqr-cv", "payload-eight-lqr-cv", "wind-hover-lqr-cv",
+    "gust-hover-lqr-cv", "battery-sag-lqr-cv", "ground-effect-lqr-cv",
+    "payload-hover-lqr-cp", "payload-eight-lqr-cp", "wind-hover-lqr-cp",
+    "gust-hover-lqr-cp", "battery-sag-lqr-cp", "ground-effect-lqr-cp", "payload-hover-pid",
+    "payload-eight-pid", "wind-hover-pid", "gust-hover-pid", "battery-sag-pid",
+    "ground-effect-pid", "payload-hover-hinf", "payload-eight-hinf", "wind-hover-hinf",
+    "gust-hover-hinf", "battery-sag-hinf", "ground-effect-hinf", "outage-1s-hover",
+    "outage-1s-eight", "outage-2s-hover", "outage-2s-eight",
 )
 """The scenarios ``gs eval --scenario`` takes, in suite order, for its help (importing the
 suite to list them would slow every ``gs`` command; a test checks they are the suite's)."""
@@ -84,7 +94,8 @@ def evaluate(
              "1-5 or a list 1,4); the report gives the worst case over the seeds.")] = None,
     out: OutAlias = None,
 ) -> None:
-    """Fly the thesis's Ch. 11 flight tests and issue 13's in the virtual lab; write a report.
+    """Fly the thesis's Ch. 11 flight tests and the later ones (headings, trajectory files,
+    disturbances) in the virtual lab; write a report.
 
     Metrics come from the virtual lab's ground truth; the report is `report.md` with
     PNG figures mirroring Fig. 11.1-11.8 and `metrics.json`. With `--perturb` the

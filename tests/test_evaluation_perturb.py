@@ -164,7 +164,7 @@ def test_a_short_perturbed_suite_reports_every_seed_and_the_worst(tmp_path: Path
         assert report.outcomes[name].record.meta["seed"] == s["record_seed"]
     assert {t["scenario"] for t in data["targets"]} == set(names)
     text = report.report_md.read_text(encoding="utf-8")
-    assert "## Perturbed plants" in text and "## Targets (issue 13)" in text
+    assert "## Perturbed plants" in text and "## Targets" in text
     assert "| 1 | " in text and "| 2 | " in text  # the plant table's rows
     rms = report.metrics["yaw-turn"]["rms_m"]
     assert f"{100 * rms:.2f} (s{report.worst_seeds['yaw-turn']['rms_m']})" in text

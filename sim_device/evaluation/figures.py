@@ -35,6 +35,7 @@ from groundstation.evaluation.plotting import (
 )
 from groundstation.evaluation.record import FlightRecord
 from groundstation.loop.supervisor import AIRBORNE, State
+from sim_device.evaluation.figures_disturbances import disturbance_figures
 from sim_device.evaluation.figures_inputs import input_figures
 from sim_device.evaluation.figures_issue13 import issue13_figures
 from sim_device.evaluation.scenarios import STEP_TIME_S
@@ -349,6 +350,7 @@ def all_figures(records: Records, models: Mapping[str, SimResult], out: Path,
         lambda: low_hover(records, out), lambda: outage(records, out),
         lambda: thrust_error(records, out), lambda: hinf(records, out),
         lambda: issue13_figures(records, out), lambda: input_figures(records, out),
+        lambda: disturbance_figures(records, out),
     ]
     paths: list[Path] = []
     for make in makers:

@@ -1,4 +1,4 @@
-"""The evaluation suite as data: the flights of thesis Ch. 11 and the additions of issue 13.
+"""The evaluation suite as data: the flights of thesis Ch. 11 and the additions since.
 
 A :class:`Scenario` names a trajectory, a controller, the Vicon rate, how long the
 trajectory is flown and the configuration overrides that inject faults. The
@@ -32,6 +32,19 @@ shaped references (``trajectory.shaping: min-jerk``), at several headings:
 * the H-infinity design with the rate-loop lag on a plant whose rate gains are 30 %
   low and 30 % high (under ``--perturb`` the rest of the plant is drawn as for every
   other flight).
+
+The disturbance flights (:data:`DISTURBANCES`), Vicon at 10 Hz, on shaped references, each on
+``lqr-ff``, the thesis's two LQRs, the PID and the robust H-infinity design (events at lab
+times :data:`EVENT_S` in hover, :data:`EIGHT_EVENT_S` during the eight):
+
+* a payload: the mass steps by +20 % (``sim.payload_steps``) in hover and mid-lap of the
+  8 s figure-eight;
+* wind (``sim.wind``: the plant feels rotor and body drag on its airspeed): a steady 3 m/s
+  from the south, and a 1 s, 4 m/s gust in still air;
+* a battery that loses 10 % of the lift over a minute (``sim.battery_droop``);
+* ground effect at take-off and landing (``sim.ground_effect``);
+* Vicon lost for 1 s and 2 s in hover and mid-eight (``lqr-ff`` only: the estimator's
+  dead reckoning), on the drawn IMU scale errors and biases.
 
 Trajectory files (:data:`FILES`), ``lqr-ff`` with Vicon at 10 Hz, each flown once and
 scored over the whole of tracking (``settle_s`` 0: the file starts at rest where the
@@ -85,6 +98,30 @@ The issue asks the design to stand rate gains 30 % off; it has no integral actio
 the drawn mass and thrust errors would only show that (a height offset, or a take-off
 that never reaches its height)."""
 
+EVENT_S = 20.0
+"""Lab time of the payload step, the gust and the Vicon outage in hover [s]: about 12 s into
+tracking (take-off ends near 7.8 s), the take-off's transient long gone."""
+
+EIGHT_EVENT_S = 27.0
+"""Lab time of the payload step and the outage during the figure-eight [s]: about 19 s into
+tracking, in the third lap."""
+
+PAYLOAD = 1.2
+"""The payload: the mass times 1.2 (+20 %)."""
+
+WIND_M_S = 3.0
+"""The steady wind [m/s], from the south (blowing north)."""
+
+GUST_M_S = 4.0
+"""The gust's peak [m/s] (1-cosine over 1 s), blowing north."""
+
+OUTAGE_HOLD_S = 3.0
+"""``safety.vicon_loss_land_s`` of the 2 s outages [s] (the default, 2 s, lands)."""
+
+DISTURBED = ("lqr-ff", "lqr-cv", "lqr-cp", "pid", "hinf-rate-loop")
+"""The controllers the disturbances are flown on (H-infinity: the robust design with
+the rate-loop lag; the thesis's does not fly)."""
+
 DATA = Path(__file__).resolve().parent / "data"
 """The trajectory files the file scenarios fly."""
 
@@ -104,6 +141,11 @@ class Scenario:
     overrides : further configuration overrides (dotted paths), e.g. faults
     settle_s : tracking time skipped by the tracking metrics [s]
     expect_track : False if the thesis expects this flight not to reach tracking
+    event_s : lab time [s] of a disturbance the event metrics judge (a payload, a gust, a
+        Vicon outage; :mod:`sim_device.evaluation.events`), or None
+    window_s : how long after ``event_s`` the event metrics look [s]
+    outage_s : the Vicon outage's length [s] starting at ``event_s`` (the estimate's drift
+        through it is judged), or None
     """
 
     name: str
@@ -117,6 +159,9 @@ class Scenario:
     overrides: Mapping[str, Any] = field(default_factory=dict)
     settle_s: float = 2.0
     expect_track: bool = True
+    event_s: float | None = None
+    window_s: float = 10.0
+    outage_s: float | None = None
 
     @property
     def is_step(self) -> bool:
@@ -220,8 +265,60 @@ def _files() -> list[Scenario]:
     return out
 
 
+def _disturbances() -> list[Scenario]:
+    """What a lab throws at the vehicle (see the module doc), on every controller."""
+    out: list[Scenario] = []
+    for c in DISTURBED:
+        tag = "hinf" if c == "hinf-rate-loop" else c
+        out += [
+            Scenario(f"payload-hover-{tag}", "payload", f"+20 % mass picked up in hover, {c}",
+                     "disturbance", "hover", c, 25.0,
+                     overrides={**SHAPED, "sim.payload_steps": [[EVENT_S, PAYLOAD]]},
+                     event_s=EVENT_S),
+            Scenario(f"payload-eight-{tag}", "payload",
+                     f"+20 % mass picked up mid-lap of the figure-eight, {c}", "disturbance",
+                     "figure-eight", c, 32.0,
+                     overrides={**SHAPED, **EIGHT,
+                                "sim.payload_steps": [[EIGHT_EVENT_S, PAYLOAD]]},
+                     settle_s=8.0, event_s=EIGHT_EVENT_S),
+            Scenario(f"wind-hover-{tag}", "wind", f"Hover in a steady 3 m/s wind (north), {c}",
+                     "disturbance", "hover", c, 20.0,
+                     overrides={**SHAPED, "sim.wind": {"velocity_m_s": [WIND_M_S, 0.0, 0.0]}}),
+            Scenario(f"gust-hover-{tag}", "wind", f"A 1 s, 4 m/s gust (north) in hover, {c}",
+                     "disturbance", "hover", c, 25.0,
+                     overrides={**SHAPED, "sim.wind": {"gusts": [[EVENT_S, 1.0, GUST_M_S,
+                                                                  0.0, 0.0]]}},
+                     event_s=EVENT_S),
+            Scenario(f"battery-sag-{tag}", "battery",
+                     f"Hover while the battery loses 10 % of the lift in a minute, {c}",
+                     "disturbance", "hover", c, 60.0,
+                     overrides={**SHAPED, "sim.battery_droop": 0.1,
+                                "sim.battery_droop_time_s": 60.0}),
+            Scenario(f"ground-effect-{tag}", "ground-effect",
+                     f"Take-off, hover and landing in ground effect, {c}", "disturbance",
+                     "hover", c, 15.0, overrides={**SHAPED, "sim.ground_effect": {}}),
+        ]
+    for length in (1.0, 2.0):
+        # the default lands after 2 s without Vicon; the 2 s loss is flown on a lab that
+        # lets the vehicle hold for 3 s (safety.vicon_loss_land_s), to see it through
+        hold = {"safety.vicon_loss_land_s": OUTAGE_HOLD_S} if length >= 2.0 else {}
+        out += [Scenario(f"outage-{length:g}s-hover", "vicon-loss",
+                         f"A {length:g} s Vicon outage in hover, lqr-ff", "disturbance", "hover",
+                         "lqr-ff", 25.0,
+                         overrides={**SHAPED, **hold,
+                                    "sim.vicon.outages": [[EVENT_S, length]]},
+                         event_s=EVENT_S, outage_s=length),
+                Scenario(f"outage-{length:g}s-eight", "vicon-loss",
+                         f"A {length:g} s Vicon outage mid-lap of the figure-eight, lqr-ff",
+                         "disturbance", "figure-eight", "lqr-ff", 32.0,
+                         overrides={**SHAPED, **EIGHT, **hold,
+                                    "sim.vicon.outages": [[EIGHT_EVENT_S, length]]},
+                         settle_s=8.0, event_s=EIGHT_EVENT_S, outage_s=length)]
+    return out
+
+
 def _suite() -> tuple[Scenario, ...]:
-    return (*_thesis(), *_issue13(), *_files())
+    return (*_thesis(), *_issue13(), *_files(), *_disturbances())
 
 
 SUITE: tuple[Scenario, ...] = _suite()
@@ -235,6 +332,9 @@ ISSUE13: tuple[str, ...] = tuple(s.name for s in _issue13())
 
 FILES: tuple[str, ...] = tuple(s.name for s in _files())
 """The names of the trajectory-file flights."""
+
+DISTURBANCES: tuple[str, ...] = tuple(s.name for s in _disturbances())
+"""The names of the disturbance flights (disturbances and Vicon loss)."""
 
 
 def select(names: Sequence[str] | None = None) -> tuple[Scenario, ...]:

@@ -88,7 +88,7 @@ def _targets_section(results: list[TargetResult], perturbed: bool) -> list[str]:
     if not results:
         return []
     worst = "the worst case over the seeds" if perturbed else "from the nominal plant"
-    lines = ["## Targets (issue 13)", "",
+    lines = ["## Targets", "",
              f"Each figure is {worst}; a target is met only if every flight of the "
              "scenario completed.", "",
              "| scenario | target | figure | seed | met |", "|---|---|---|---|---|"]

@@ -1,4 +1,4 @@
-"""Issue 13's targets, checked against the worst case over the perturbed plants.
+"""The targets, checked against the worst case over the perturbed plants.
 
 :data:`TARGETS` holds, per scenario, the figures the issue asks for; :func:`check_targets`
 compares them with the metrics of a run (``EvalReport.metrics``: the worst case over the
@@ -53,10 +53,34 @@ TARGETS: dict[str, tuple[Target, ...]] = {
     "file-eight-4s": (Target("rms_m", 0.025, "dense CSV eight, 4 s a lap: <= 2.5 cm RMS"),),
     "file-figure8": (Target("rms_m", 0.025, "Crazyflie figure8.csv: <= 2.5 cm RMS"),),
     "hover-exact-angles": (Target("rms_m", 0.005, "hover on exact-angle Vicon: <= 0.5 cm RMS"),),
+    # the disturbances' that this code meets (the others: OPEN below)
+    "payload-hover-lqr-ff": (Target("event_recover_s", 1.0, "+20 % payload in hover: back "
+                                    "within 1 cm in <= 1 s"),),
+    "payload-eight-lqr-ff": (Target("lap_rms_m", 0.015, "+20 % payload during the 8 s "
+                                    "figure-eight: <= 1.5 cm RMS over the lap with the step"),),
+    "wind-hover-lqr-ff": (Target("rms_m", 0.005, "3 m/s steady wind: hover <= 0.5 cm RMS"),),
 }
-"""Issue 13's targets by scenario name."""
+"""The targets this code meets, by scenario name (asserted in CI on five seeds)."""
 
-SCALES: dict[str, tuple[float, str]] = {"_m": (100.0, "cm"), "_deg": (1.0, "deg")}
+OPEN: dict[str, tuple[Target, ...]] = {
+    "payload-hover-lqr-ff": (Target("event_peak_m", 0.020, "+20 % payload in hover: peak "
+                                    "<= 2 cm"),),
+    "gust-hover-lqr-ff": (Target("event_peak_m", 0.020, "gust (1 s, 4 m/s): peak <= 2 cm"),),
+    "outage-1s-hover": (Target("outage_est_max_m", 0.010, "1 s Vicon outage in hover: the "
+                               "estimate's worst error <= 1 cm"),),
+}
+"""The disturbances' targets this code does not meet (the report shows them, not met, with the
+figure reached; ``REACHED`` holds what it does reach, asserted in CI against regressions)."""
+
+REACHED: dict[str, tuple[Target, ...]] = {
+    "payload-hover-lqr-ff": (Target("event_peak_m", 0.025, "reached 2.26 cm; target: 2 cm"),),
+    "gust-hover-lqr-ff": (Target("event_peak_m", 0.031, "reached 2.82 cm; target: 2 cm"),),
+    "outage-1s-hover": (Target("outage_est_max_m", 0.033, "reached 2.97 cm; target: 1 cm"),),
+}
+"""Bounds on the figures of :data:`OPEN` (reached, worst of seeds 1-5, plus ~10 %)."""
+
+SCALES: dict[str, tuple[float, str]] = {"_m": (100.0, "cm"), "_deg": (1.0, "deg"),
+                                        "_s": (1.0, "s")}
 
 
 def display(key: str, value: float) -> str:
@@ -95,15 +119,16 @@ class TargetResult:
 
 
 def check_targets(metrics: Mapping[str, Mapping[str, Any]],
-                  seed_of: Mapping[str, Mapping[str, int]] | None = None
+                  seed_of: Mapping[str, Mapping[str, int]] | None = None,
+                  table: Mapping[str, tuple[Target, ...]] | None = None
                   ) -> list[TargetResult]:
     """The targets of every scenario present in ``metrics`` (name -> metrics).
 
     seed_of : name -> metric key -> the seed that gave the figure (worst case); None or
-    missing for a nominal run.
+    missing for a nominal run; table : the targets to check (default :data:`TARGETS`).
     """
     out = []
-    for name, targets in TARGETS.items():
+    for name, targets in (TARGETS if table is None else table).items():
         m = metrics.get(name)
         if m is None:
             continue
