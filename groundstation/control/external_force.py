@@ -51,12 +51,13 @@ vehicle turns, with its rate (alpha-beta filters: a ramp is followed without lag
 * horizontal, while a disturbance moves: an alpha-beta filter, ``sqrt(q)`` = 600 m/s^4
   (alpha 0.92, beta 1.02, no -3 dB point below Nyquist: nearly the samples themselves,
   0.063 m/s^2 of noise on the value and 4.7 m/s^3 on the rate, 0.48 rad/s of tilt rate fed
-  forward while it is on: the price of following a gust), switched on when one innovation of the quiet estimate passes
-  4 standard deviations of the noise (0.27 m/s^2), or the mean of the last 8 passes 4 of
-  the mean's (0.096 m/s^2): for Gaussian noise a false switch every ~80 s, each 0.5 s of the
-  fast filter's noise; a 4 m/s gust is seen 0.17 s after it begins. The fast filter stays
-  on 0.5 s after the last detection, then hands back to the quiet one started from the
-  mean of the last 16 samples.
+  forward while it is on: the price of following a gust), switched on when one
+  innovation of the quiet estimate passes 4 standard deviations of the noise
+  (0.27 m/s^2), or the mean of the last 8 passes 4 of the mean's (0.096 m/s^2): for
+  Gaussian noise a false switch every ~80 s, each 0.5 s of the fast filter's noise; a
+  4 m/s gust is seen 0.17 s after it begins. The fast filter stays on 0.5 s after the
+  last detection, then hands back to the quiet one started from the mean of the last 16
+  samples.
 
 The controller (``lqr-ff``) asks the vehicle for the reference's acceleration less ``d``
 (the tilt and the vertical force) and for the reference's jerk less ``d``'s rate (the body
