@@ -170,10 +170,11 @@ class Plant:
         return max(0.5, 1.0 - self._droop_rate * (self.t if t is None else t))
 
     def lift_factor(self) -> float:
-        """The rotors' lift now over the polynomial's: the battery and the ground effect
-        (thrust faults act on the dynamics only, see :meth:`specific_force`)."""
+        """The rotors' lift now over the polynomial's: the battery, the ground effect and
+        any thrust fault (the accelerometer feels all of them, up to its saturation)."""
         ground = self._ground
-        return self.battery_factor() * (1.0 if ground is None else ground.factor(self.pz))
+        factor = self.battery_factor() * (1.0 if ground is None else ground.factor(self.pz))
+        return factor * self.fault_factor(self.t) if self._faults else factor
 
     def mass_at(self, t: float) -> float:
         """The true mass at time ``t`` [s] [kg]: the vehicle's times every payload step's
@@ -331,8 +332,8 @@ class Plant:
         """What an ideal accelerometer reads, FRD [m/s^2]: non-gravitational force / m.
 
         In flight ``(0, 0, (b * lift + I_i v_3)/m)`` (``b`` the battery and the ground
-        effect; with ``PlantParams.wind`` the drag too, see the module doc; a thrust fault
-        is not felt, as before); resting on the floor the contact force cancels gravity,
+        effect and a thrust fault; with ``PlantParams.wind`` the drag too, see the module
+        doc); resting on the floor the contact force cancels gravity,
         so ``-bCe [0, 0, g]`` = (0, 0, -g) when level.
         """
         p = self.params

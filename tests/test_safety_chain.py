@@ -1,11 +1,11 @@
 """The safety chain judged by the truth: faults in the plant and the reference, not in the
 estimate, and what the vehicle really did.
 
-A thrust fault (the rotors give more lift than commanded for 0.3 s: an ESC glitch) pushes
-the vehicle up faster than the accelerometer can measure (it saturates at 14 m/s^2,
-Ch. 6.2), so the dead-reckoned estimate stays near 1 m while the vehicle climbs. Before,
+A thrust fault (the rotors give several times the lift commanded for a fraction of a
+second: an ESC glitch) pushes the vehicle up faster than the accelerometer can measure
+(it clips at 14 m/s^2, Ch. 6.2), so the dead-reckoned estimate lags the climb. Before,
 every layer trusted the estimate: the true poses were refused, read as a lost Vicon,
-the landing was flown on dead reckoning and the motors idled 14 m up. Now the poses that
+the landing was flown on dead reckoning and the motors idled in the air. Now poses that
 agree with each other overrule the estimate, the geofence acts on the truth, and the
 motors are idled only on evidence of the floor.
 
@@ -52,24 +52,59 @@ def disarmed_height(result: FlightResult) -> float:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("lift_scale", "vicon_hz"), [(2.0, 100.0), (2.0, 10.0), (1.6, 10.0),
-                                                      (1.3, 100.0)])
-def test_a_thrust_fault_that_blinds_the_estimate_is_caught_by_the_truth(
-        lift_scale: float, vicon_hz: float) -> None:
+def fly_fault(lift_scale: float, duration_s: float, vicon_hz: float,
+              **overrides: object) -> tuple[GroundStationConfig, FlightResult]:
+    """Hover at 1 m; at 12 s (4 s into tracking) the rotors give ``lift_scale`` times their
+    lift for ``duration_s``."""
     cfg = sim_config(**{"trajectory.name": "hover", "sim.vicon.rate_hz": vicon_hz,
-                        **TRACKED_FAR})
+                        **TRACKED_FAR, **overrides})
     result = fly_in_process(cfg, duration_s=20.0, max_time_s=60.0, events=[
-        (12.0, lambda f: f.lab.thrust_fault(lift_scale, 0.3 if lift_scale > 1.5 else 1.0))])
-    reasons = [tr.reason for tr in result.transitions if tr.failsafe]
-    assert not result.success and reasons, result.transitions
-    # the first failsafe is the estimate overruled by Vicon, or the geofence on the truth
-    assert reasons[0].startswith(("estimate was wrong", "left the volume")), reasons
-    margin = cfg.vicon.plausibility_margin_m
-    assert excursion(cfg, result) < margin, excursion(cfg, result)
+        (12.0, lambda f: f.lab.thrust_fault(lift_scale, duration_s))])
+    return cfg, result
+
+
+def assert_judged_by_the_truth(cfg: GroundStationConfig, result: FlightResult) -> None:
+    """The truth never left the volume by the margin while the ground station flew it, and
+    the motors were never idled in the air."""
+    assert excursion(cfg, result) < cfg.vicon.plausibility_margin_m, excursion(cfg, result)
     assert disarmed_height(result) < 0.1
-    if result.final_state is not State.HANDBACK:  # landed: on the floor, by the truth
-        assert result.final_state is State.DONE
+    if result.final_state is State.DONE:
         assert -result.trace["true_pos"][-1, 2] < 0.02
+
+
+@pytest.mark.parametrize(("lift_scale", "duration_s", "vicon_hz"),
+                         [(3.0, 0.3, 100.0), (3.0, 0.3, 10.0), (2.5, 0.5, 10.0)])
+def test_a_thrust_fault_that_blinds_the_estimate_is_caught_by_the_truth(
+        lift_scale: float, duration_s: float, vicon_hz: float) -> None:
+    """Three times the lift is 29 m/s^2 of specific force, twice the accelerometer's range:
+    the estimate misses the climb, the poses overrule it, and the pilot gets the vehicle."""
+    cfg, result = fly_fault(lift_scale, duration_s, vicon_hz)
+    failsafes = [tr for tr in result.transitions if tr.failsafe]
+    assert failsafes and not result.success, result.transitions
+    assert failsafes[0].reason.startswith("estimate was wrong"), failsafes[0].reason
+    assert failsafes[0].new is State.HANDBACK and 12.3 <= failsafes[0].t < 12.6
+    assert_judged_by_the_truth(cfg, result)
+
+
+def test_a_thrust_fault_that_pushes_the_vehicle_out_meets_the_geofence() -> None:
+    """Landing on the re-anchored estimate (safety.on_overruled: land) while four times the
+    lift for a second climbs through the ceiling: the geofence, watching Vicon, hands back
+    as the truth crosses it, long before it is the margin beyond."""
+    cfg, result = fly_fault(4.0, 1.0, 100.0, **{"safety.on_overruled": "land"})
+    reasons = [tr.reason for tr in result.transitions if tr.failsafe]
+    assert any(r.startswith("left the volume") for r in reasons), reasons
+    assert result.final_state is State.HANDBACK
+    assert (-result.trace["true_pos"][:, 2]).max() > 2.0  # it did leave: through the ceiling
+    assert_judged_by_the_truth(cfg, result)
+
+
+def test_a_thrust_fault_the_accelerometer_feels_is_flown_through() -> None:
+    """Twice the lift for 0.3 s, 20 m/s^2 (the accelerometer clips at 14): the estimate keeps
+    up well enough, the controller takes the vehicle back, nothing fails safe."""
+    cfg, result = fly_fault(2.0, 0.3, 100.0)
+    assert result.final_state is State.DONE and result.success, result.transitions
+    assert (-result.trace["true_pos"][:, 2]).max() < 1.5
+    assert_judged_by_the_truth(cfg, result)
 
 
 class ArmedGlitch:
