@@ -272,7 +272,11 @@ def test_keepalive_holds_the_rate_then_hands_back(vehicle: PtyVehicle) -> None:
         times = [t for t, c in vehicle.commands if c.ctrl]
     gaps = [b - a for a, b in itertools.pairwise(times)]
     assert times[-1] - times[0] >= 0.15  # held for about stale_command_s
-    assert max(gaps) < 0.05  # never half the 100 ms fallback
+    # resent at the command rate (50 Hz); the vehicle's 100 ms watchdog never expires. The
+    # gaps are read times of a responder thread, which a loaded machine holds up by tens
+    # of milliseconds now and then: the median is the link's rate, the largest the watchdog's
+    assert sorted(gaps)[len(gaps) // 2] == pytest.approx(0.020, abs=0.005)
+    assert max(gaps) < 0.1
     assert stats.keepalive_resends >= 5
 
 
