@@ -507,6 +507,9 @@ class Client:
             last = name
 
     def _motion(self, request: Mapping[str, Any]) -> Motion:
+        # a daemon that is not there must not cost the planner's grace: ask for the status
+        # first (one loopback round trip), so only a daemon that answers gets the longer wait
+        self.request({"request": "status"})
         reply = self.request(request, self.timeout_s + self.plan_wait_s)
         return Motion.from_reply(reply["motion"])
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import stat
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -54,15 +55,18 @@ def test_gs_keys_never_overwrites_a_key(tmp_path: Path) -> None:
     assert bad.exit_code == 2 and "plain file name" in bad.output
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("args", [
     ["goto", "0.5", "0", "-1"],  # a negative coordinate is an argument, not an option
     ["status"], ["hold"], ["land"],
 ])
 def test_api_commands_say_when_no_daemon_answers(args: list[str]) -> None:
+    """Within the timeout asked for, motions too (they wait longer for a plan only once a
+    daemon has answered)."""
+    began = time.monotonic()
     result = RUNNER.invoke(app, [*args, "--endpoint", "tcp://127.0.0.1:9", "--timeout", "0.3"])
     assert result.exit_code == 1, result.output
     assert "no reply from tcp://127.0.0.1:9" in result.output
+    assert time.monotonic() - began < 5.0  # 0.3 s asked; the motion's plan wait is 20 s
 
 
 def test_api_commands_refuse_bad_usage() -> None:

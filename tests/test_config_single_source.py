@@ -10,6 +10,7 @@ did nothing before (``safety.gravity_check_deg``, the IMU period) reach the esti
 
 from __future__ import annotations
 
+import functools
 import io
 import math
 import tokenize
@@ -90,6 +91,15 @@ def _number_tokens(path: Path) -> list[tuple[str, int]]:
 SOURCES = sorted(p for d in ("groundstation", "sim_device", "benchmarks")
                  for p in (ROOT / d).rglob("*.py"))
 
+
+@functools.cache
+def _decimal_tokens() -> tuple[tuple[float, str], ...]:
+    """Every decimal literal of :data:`SOURCES` with where it is written ('file:line'),
+    tokenized once for all the numbers checked."""
+    return tuple((value, f"{path.relative_to(ROOT)}:{line}") for path in SOURCES
+                 for token, line in _number_tokens(path)
+                 if (value := _decimal(token)) is not None)
+
 UNIQUE = [
     # Tables 6.1-6.3 and eq. 3.7 (their every entry is distinctive), and the model's
     # mass, rate gain, inflow and rate-loop time constant
@@ -100,14 +110,11 @@ UNIQUE = [
 ]
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("literal", UNIQUE)
 def test_each_thesis_number_is_written_once(literal: str) -> None:
     value = float(literal)
-    found = {f"{path.relative_to(ROOT)}:{line}" for path in SOURCES
-             for token, line in _number_tokens(path)
-             if _decimal(token) is not None and math.isclose(_decimal(token) or 0.0, value,
-                                                             rel_tol=1e-12)}
+    found = {where for number, where in _decimal_tokens()
+             if math.isclose(number, value, rel_tol=1e-12)}
     assert len(found) == 1, f"{literal} written in {sorted(found)}"  # one definition
 
 
