@@ -11,7 +11,11 @@ telemetry ports) and in a flight-log directory that nobody can write, as
 that copy, as a person would, and each command must succeed. What the identification
 finds is compared with the virtual vehicle's own parameters.
 
-Real time, about four minutes: run under the shared lock (``flock /tmp/realtime.lock``).
+One virtual lab serves the whole day; each step is a test of its own that takes the
+configuration the steps before it left (module-scoped fixtures, in the guide's order), so a
+failure names its step. The flights are as short as what they feed allows: a 4 s
+thrust-only hover (the thrust map needs the hover), the identification flight (36.5 s),
+and 6 s of the configured square fully automatic.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import re
 import socket
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -70,6 +75,7 @@ class Day:
             "realtime.cpu_dma_latency_us": None,  # the PC's PM QoS is not the rehearsal's
         })
         self.lab = tmp / "lab.yaml"
+        self.vehicle: GroundStationConfig = self.config  # the virtual vehicle's own file
         self.save()
 
     def save(self, path: Path | None = None, config: GroundStationConfig | None = None
@@ -101,6 +107,19 @@ class Day:
         report: dict[str, Any] = json.loads(out[-1])
         return report
 
+    def json_together(self, *commands: tuple[str, ...]) -> list[dict[str, Any]]:
+        """Several ``gs ... --json`` that only read (a flight log) run at once, as a
+        person with several terminals might; their reports in the order given."""
+        children = [subprocess.Popen([str(GS), *args, "--json"], cwd=self.tmp, env=self.env,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True) for args in commands]
+        reports = []
+        for args, child in zip(commands, children, strict=True):
+            out, err = child.communicate(timeout=120.0)
+            assert child.returncode == 0, (args, child.returncode, out[-3000:], err[-3000:])
+            reports.append(json.loads(out.strip().splitlines()[-1]))
+        return reports
+
     def fly(self, config: Path, *args: str) -> tuple[str, Path]:
         """``gs fly``; its output (stdout, then the log lines of stderr) and the flight log
         its summary's last line names."""
@@ -111,75 +130,116 @@ class Day:
         return done.stdout + done.stderr, Path(log.group(1))
 
 
-@pytest.mark.realtime
-@pytest.mark.slow
-@pytest.mark.timeout(900)  # about 4 min on an idle 2-core machine, three flights in real time
-def test_the_first_day_of_the_guide_on_the_virtual_lab(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def day(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Day]:
+    """The virtual vehicle (30 % off in its rate gains, 10 % weak rotors) in its own
+    process, and the user's copy of config/lab.yaml pointing at it."""
+    tmp = tmp_path_factory.mktemp("rehearsal")
     vicon_port = free_udp_port()
     vehicle = sim_config(**{"vicon.port": vicon_port, "sim.k_rate_scale": TRUE_OVER_MODEL,
                             "sim.thrust_scale": TRUE_LIFT,
-                            "logging.flight_log_dir": str(tmp_path / "sim")})
-    device_file = tmp_path / "virtual-vehicle.yaml"
+                            "logging.flight_log_dir": str(tmp / "sim")})
+    device_file = tmp / "virtual-vehicle.yaml"
     device_file.write_text(dump_config(vehicle), encoding="utf-8")
-    with SimDeviceProcess(device_file, tmp_path / "truth.npz", duration=850.0,
-                          stderr=tmp_path / "sim.err") as device:
-        day = Day(tmp_path, device.pty_path, vicon_port)
-        lab = str(day.lab)
-        configured_k = np.array(day.config.vehicle.k_rate)
-
-        # 1. link check: healthy, nothing that moves the vehicle sent
-        out = day.gs("link-check", "-c", lab, "--serial-port", day.pty, "--seconds", "3")
-        assert out.splitlines()[-1] == "verdict: healthy"
-
-        # 2. Vicon check: frames right, the noise pasted
-        vicon = day.json("calibrate", "vicon", "-c", lab, "--seconds", "3")
-        assert vicon["frames_ok"] is True
-        day.paste(vicon)
-
-        # 3. IMU calibration
-        day.paste(day.json("calibrate", "imu", "-c", lab, "--serial-port", day.pty,
-                           "--seconds", "3"))
-
-        # 4. a first thrust map from the stick the virtual vehicle hovers at (the pilot
-        # would read it with gs link-check --expect-switch off while hovering by hand)
-        v = vehicle.vehicle
-        weight = v.mass_kg * v.gravity
-        stick = brentq(lambda u: -TRUE_LIFT * np.polyval(v.thrust_poly, u) - weight, 1, 4095)
-        first = day.json("identify", "hover-stick", f"{stick:.0f}", "-c", lab)
-        scale = first["vehicle.thrust_poly"][3] / v.thrust_poly[3]
-        assert scale == pytest.approx(TRUE_LIFT, rel=0.01)
-        day.paste(first)
-
-        # 6. thrust-only flight (the pilot's neutral sticks hold the attitude), its log
-        # in the user's state directory, said in one line
-        thrust_only = day.save(tmp_path / "lab-thrust.yaml",
-                               apply_overrides(day.config, {"channels.auto": ["thrust"]}))
-        out, log = day.fly(thrust_only, "--trajectory", "hover", "--duration", "10")
-        assert out.count("cannot be written") == 1 and UNWRITABLE in out
-        assert log.parent == tmp_path / "state" / "groundstation" / "flightlogs"
-        thrust = day.json("identify", "thrust", str(log))
-        assert thrust["vehicle.thrust_poly"][3] / v.thrust_poly[3] == pytest.approx(
-            TRUE_LIFT, rel=0.03)
-        day.paste(thrust)
-
-        # 7. the identification flight and what it feeds
-        out, log = day.fly(day.lab, "--trajectory", "sysid")
-        rates = day.json("identify", "rates", str(log))
-        found = np.array(rates["vehicle.k_rate"])
-        truth = configured_k * np.array(TRUE_OVER_MODEL)
-        assert np.all(np.abs(found / truth - 1.0) < 0.05), (found, truth)
-        day.paste(rates)
-        day.paste(day.json("identify", "scales", str(log)))
-        day.paste(day.json("identify", "thrust", str(log)))
-        day.paste(day.json("identify", "inflow", str(log)))
-        day.gs("verify-model", str(log), "--json")
-
-        # 8. full automatic, with what the day found
-        day.gs("check-config", lab)
-        out, log = day.fly(day.lab)
-        tracking = re.search(r"tracking error \(estimate vs reference\): RMS ([0-9.]+) cm", out)
-        assert tracking is not None and float(tracking.group(1)) < 2.0, out[-2000:]
-        summary = next(x for x in out.splitlines() if x.startswith("flight ended in"))
-        assert "mission completed" in summary and "exit code 0" in summary
-    with np.load(tmp_path / "truth.npz") as truth_log:  # the vehicle flew: the truth says so
+    with SimDeviceProcess(device_file, tmp / "truth.npz", duration=600.0,
+                          stderr=tmp / "sim.err") as device:
+        day = Day(tmp, device.pty_path, vicon_port)
+        day.vehicle = vehicle
+        yield day
+    with np.load(tmp / "truth.npz") as truth_log:  # the vehicle flew: the truth says so
         assert float(-np.min(truth_log["position"][:, 2])) > 0.9
+
+
+@pytest.fixture(scope="module")
+def grounded(day: Day) -> dict[str, Any]:
+    """Steps 1-4, the vehicle on the ground: link check, Vicon and IMU calibration, a
+    first thrust map from the hover stick; each report pasted."""
+    lab = str(day.lab)
+    found: dict[str, Any] = {}
+    # 1. link check: healthy, nothing that moves the vehicle sent
+    found["link"] = day.gs("link-check", "-c", lab, "--serial-port", day.pty, "--seconds", "2")
+    # 2. Vicon check: frames right, the noise pasted
+    found["vicon"] = day.json("calibrate", "vicon", "-c", lab, "--seconds", "2")
+    day.paste(found["vicon"])
+    # 3. IMU calibration
+    day.paste(day.json("calibrate", "imu", "-c", lab, "--serial-port", day.pty,
+                       "--seconds", "2"))
+    # 4. a first thrust map from the stick the virtual vehicle hovers at (the pilot would
+    # read it with gs link-check --expect-switch off while hovering by hand)
+    v = day.vehicle.vehicle
+    weight = v.mass_kg * v.gravity
+    stick = brentq(lambda u: -TRUE_LIFT * np.polyval(v.thrust_poly, u) - weight, 1, 4095)
+    found["first"] = day.json("identify", "hover-stick", f"{stick:.0f}", "-c", lab)
+    day.paste(found["first"])
+    return found
+
+
+@pytest.fixture(scope="module")
+def thrust_only(day: Day, grounded: dict[str, Any]) -> dict[str, Any]:
+    """Step 6: the thrust-only flight (the pilot's neutral sticks hold the attitude) and
+    the thrust map its log gives."""
+    config = day.save(day.tmp / "lab-thrust.yaml",
+                      apply_overrides(day.config, {"channels.auto": ["thrust"]}))
+    out, log = day.fly(config, "--trajectory", "hover", "--duration", "4")
+    thrust = day.json("identify", "thrust", str(log))
+    day.paste(thrust)
+    return {"out": out, "log": log, "thrust": thrust}
+
+
+@pytest.fixture(scope="module")
+def identified(day: Day, thrust_only: dict[str, Any]) -> dict[str, Any]:
+    """Step 7: the identification flight and what it feeds."""
+    configured_k = np.array(day.config.vehicle.k_rate)
+    _, log = day.fly(day.lab, "--trajectory", "sysid")
+    rates, *others = day.json_together(
+        *[("identify", what, str(log)) for what in ("rates", "scales", "thrust", "inflow")],
+        ("verify-model", str(log)))
+    for report in (rates, *others[:-1]):  # verify-model's report is to read, not to paste
+        day.paste(report)
+    return {"rates": rates, "configured_k": configured_k}
+
+
+@pytest.mark.realtime
+@pytest.mark.slow
+def test_on_the_ground_the_link_vicon_imu_and_a_first_thrust_map(
+        day: Day, grounded: dict[str, Any]) -> None:
+    assert grounded["link"].splitlines()[-1] == "verdict: healthy"
+    assert grounded["vicon"]["frames_ok"] is True
+    v = day.vehicle.vehicle
+    scale = grounded["first"]["vehicle.thrust_poly"][3] / v.thrust_poly[3]
+    assert scale == pytest.approx(TRUE_LIFT, rel=0.01)
+
+
+@pytest.mark.realtime
+@pytest.mark.slow
+def test_the_thrust_only_flight_logs_where_the_user_can_and_maps_the_thrust(
+        day: Day, thrust_only: dict[str, Any]) -> None:
+    # its log in the user's state directory, said in one line
+    out = thrust_only["out"]
+    assert out.count("cannot be written") == 1 and UNWRITABLE in out
+    assert thrust_only["log"].parent == day.tmp / "state" / "groundstation" / "flightlogs"
+    v = day.vehicle.vehicle
+    assert thrust_only["thrust"]["vehicle.thrust_poly"][3] / v.thrust_poly[3] == \
+        pytest.approx(TRUE_LIFT, rel=0.03)
+
+
+@pytest.mark.realtime
+@pytest.mark.slow
+@pytest.mark.timeout(300)  # the identification flight alone is 36.5 s in real time
+def test_the_identification_flight_finds_the_rate_gains(identified: dict[str, Any]) -> None:
+    found = np.array(identified["rates"]["vehicle.k_rate"])
+    truth = identified["configured_k"] * np.array(TRUE_OVER_MODEL)
+    assert np.all(np.abs(found / truth - 1.0) < 0.05), (found, truth)
+
+
+@pytest.mark.realtime
+@pytest.mark.slow
+def test_fully_automatic_with_what_the_day_found(day: Day,
+                                                  identified: dict[str, Any]) -> None:
+    """Step 8: the configured square, fully automatic, on the parameters the day found."""
+    day.gs("check-config", str(day.lab))
+    out, _ = day.fly(day.lab, "--duration", "6")
+    tracking = re.search(r"tracking error \(estimate vs reference\): RMS ([0-9.]+) cm", out)
+    assert tracking is not None and float(tracking.group(1)) < 2.0, out[-2000:]
+    summary = next(x for x in out.splitlines() if x.startswith("flight ended in"))
+    assert "mission completed" in summary and "exit code 0" in summary
