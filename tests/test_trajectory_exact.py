@@ -21,6 +21,7 @@ from groundstation.cli import app
 from groundstation.control import FigureEight, FlightLimits, Hover, Volume, check_feasibility
 from groundstation.control.polynomial import PiecewisePolynomial
 from groundstation.control.shaping import MinJerkPath, shape_for_flight
+from groundstation.control.trajectories import square
 from groundstation.control.trajectory import YawTurn
 from groundstation.errors import TrajectoryError
 from groundstation.types import Reference
@@ -254,3 +255,24 @@ def test_every_peak_is_the_curves_own_on_random_polynomial_segments(seed: int) -
     assert report.min_lift_n == pytest.approx(lift.min(), rel=2e-4, abs=1e-3)
     np.testing.assert_allclose(report.extent_min_m, p[:, :3].min(axis=0), atol=2e-5)
     np.testing.assert_allclose(report.extent_max_m, p[:, :3].max(axis=0), atol=2e-5)
+
+
+def test_a_refusal_never_calls_a_point_inside_the_box_outside() -> None:
+    """A square lapped in a nanosecond: its corners are inside, but no bound between its
+    samples can be shown inside the volume. Each volume line either names a point that is
+    outside or says that the path cannot be shown inside, with the sample and the bound."""
+    fast = shape_for_flight(square([0.0, 0.0, -1.0], size_m=1.0, period_s=1e-9), 1e-9,
+                            LIMITS.max_accel_m_s2)[0]
+    report = check_feasibility(fast, LIMITS, volume=VOLUME, raise_on_error=False)
+    lines = [p for p in report.problems if "vol_" in p]
+    assert lines
+    lo, hi = VOLUME.allowed()
+    for line in lines:
+        said = re.search(r"\b([xyz]) = (-?\d+\.\d\d) m is (?:below the floor: )?outside", line)
+        if said is not None:
+            axis, value = "xyz".index(said[1]), float(said[2])
+            assert not lo[axis] <= value <= hi[axis], line  # what is called outside is
+        else:
+            assert re.search(r"[xyz] cannot be shown inside vol_[xyz] .*the worst sample, "
+                             r"-?\d+\.\d\d m, is inside; the proven bound between samples "
+                             r"reaches -?\d+\.\d\d m", line), line

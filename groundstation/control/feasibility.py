@@ -401,10 +401,24 @@ def _volume_problems(r: Reading, vol: Volume) -> list[str]:
                        f"{r.start[2]:.2f}) m: the start height {-r.start[2]:.2f} m is above "
                        f"the ceiling: z = {r.start[2]:.2f} m is outside {box}{less}")
         elif not -low.upper >= lo[axis]:
-            out.append(f"{_at(low)}{name} = {low.position[axis]:.2f} m is outside {box}{less}"
-                       f"{_how_many(low)}: move or shrink the path")
+            claim = _side(name, low.position[axis], -low.upper, f"{box}{less}",
+                          inside=low.position[axis] >= lo[axis])
+            out.append(f"{_at(low)}{claim}{_how_many(low)}: move or shrink the path")
         if not high.upper <= hi[axis]:
-            where = "below the floor: " if floor else ""
-            out.append(f"{_at(high)}{name} = {high.position[axis]:.2f} m is {where}outside {box}"
-                       f"{'' if floor else less}{_how_many(high)}: move or shrink the path")
+            claim = _side(name, high.position[axis], high.upper,
+                          f"{box}{'' if floor else less}",
+                          inside=high.position[axis] <= hi[axis],
+                          where="below the floor: " if floor else "")
+            out.append(f"{_at(high)}{claim}{_how_many(high)}: move or shrink the path")
     return out
+
+
+def _side(name: str, value: float, bound: float, box: str, *, inside: bool,
+          where: str = "") -> str:
+    """A refusal's claim about one side of ``box``: the worst point is outside it, or, with
+    no sample beyond it and only the proven bound (a curve too fast or too large to pin
+    down between its samples), that it cannot be shown inside."""
+    if inside:
+        return (f"{name} cannot be shown inside {box} (the worst sample, {value:.2f} m, "
+                f"is inside; the proven bound between samples reaches {bound:.2f} m)")
+    return f"{name} = {value:.2f} m is {where}outside {box}"
