@@ -1,45 +1,29 @@
 """`gs foxglove`: telemetry -> the Foxglove WebSocket protocol.
 
 The conversion is checked against independent answers (scipy's rotations, the
-protobuf wire format decoded here from the schema the SDK advertises); the live test
-runs `gs foxglove` as a user does, in its own process, against a real-time flight of
-the virtual lab and reads it with a plain WebSocket client (the ``websockets``
-library), as Foxglove Studio would: serverInfo, advertise, subscribe, binary messages
-(opcode 0x01, uint32 subscription, uint64 log time [ns], payload; little-endian).
+protobuf wire format decoded here from the schema the SDK advertises: ``descriptors``,
+``decode``). The live test, `gs foxglove` in its own process during a real-time flight
+of the virtual lab read by a plain WebSocket client, shares the X-3D flight of
+tests/test_flight_e2e.py (``test_foxglove_client_sees_the_flight``), which uses the
+decoder below.
 """
 
 from __future__ import annotations
 
-import base64
-import json
 import math
-import select
-import signal
-import socket
 import struct
-import subprocess
 import sys
-import threading
-import time
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from lab_helpers import free_udp_port, sim_config
 from scipy.spatial.transform import Rotation
 
-from groundstation.config import apply_overrides, dump_config
 from groundstation.model.quaternion import dcm_from_quat, quat_from_euler
 from groundstation.telemetry import foxglove as fx
 from groundstation.telemetry.schema import SCHEMA_VERSION, state_payload
 from groundstation.types import Reference, StateEstimate, Sticks
-
-REPO = Path(__file__).resolve().parents[1]
-GS = [sys.executable, "-c", "import sys; from groundstation.cli import main; "
-      "sys.argv[0] = 'gs'; main()"]
-
 
 # --- a protobuf decoder driven by the schema (a FileDescriptorSet), for the test only ---
 
@@ -77,7 +61,7 @@ def _fields(data: bytes) -> list[tuple[int, int, Any]]:
     return out
 
 
-def _descriptors(file_descriptor_set: bytes) -> dict[str, dict[int, tuple[str, int, str, bool]]]:
+def descriptors(file_descriptor_set: bytes) -> dict[str, dict[int, tuple[str, int, str, bool]]]:
     """Message full name -> {field number: (name, type, type name, repeated)}, read from a
     FileDescriptorSet with the field numbers of google/protobuf/descriptor.proto."""
     out: dict[str, dict[int, tuple[str, int, str, bool]]] = {}
@@ -108,7 +92,7 @@ _SCALARS = {1: ("<d", 8), 2: ("<f", 4), 6: ("<Q", 8), 7: ("<I", 4), 15: ("<i", 4
             16: ("<q", 8)}
 
 
-def _decode(descriptors: Mapping[str, Mapping[int, tuple[str, int, str, bool]]],
+def decode(descriptors: Mapping[str, Mapping[int, tuple[str, int, str, bool]]],
             name: str, data: bytes) -> dict[str, Any]:
     """A protobuf message as a dict (absent fields absent: proto3 leaves out zeros)."""
     out: dict[str, Any] = {}
@@ -118,7 +102,7 @@ def _decode(descriptors: Mapping[str, Mapping[int, tuple[str, int, str, bool]]],
         field, kind, type_name, repeated = descriptors[name][number]
         values: list[Any]
         if kind == 11:
-            values = [_decode(descriptors, type_name, raw)]
+            values = [decode(descriptors, type_name, raw)]
         elif kind == 9:
             values = [raw.decode()]
         elif kind == 12:
@@ -142,7 +126,7 @@ def _decode(descriptors: Mapping[str, Mapping[int, tuple[str, int, str, bool]]],
     return out
 
 
-def _vec(d: Mapping[str, Any], keys: str = "xyz") -> np.ndarray:
+def vec(d: Mapping[str, Any], keys: str = "xyz") -> np.ndarray:
     return np.array([d.get(k, 0.0) for k in keys])
 
 
@@ -180,7 +164,7 @@ def test_the_attitude_quaternion_is_reordered_not_changed() -> None:
         q /= np.linalg.norm(q)  # scalar-first [w, x, y, z], R(q) = eCb
         out = _by_channel(view.messages_for("state", _state(quaternion=q)))
         o = out[fx.POSE_ESTIMATE]["pose"]["orientation"]
-        xyzw = _vec(o, "xyzw")
+        xyzw = vec(o, "xyzw")
         # scipy's default order is Foxglove's (scalar last); it must be the same rotation
         np.testing.assert_allclose(Rotation.from_quat(xyzw).as_matrix(), dcm_from_quat(q),
                                    atol=1e-12)
@@ -188,7 +172,7 @@ def test_the_attitude_quaternion_is_reordered_not_changed() -> None:
                                    atol=1e-12)
         body = next(tr for tr in out[fx.TF]["transforms"] if tr["child_frame_id"] == "base_link")
         assert body["parent_frame_id"] == "ned" and body["rotation"] == o
-        assert _vec(body["translation"]).tolist() == [0.5, -0.2, -1.0]
+        assert vec(body["translation"]).tolist() == [0.5, -0.2, -1.0]
 
 
 def test_the_reference_yaw_is_a_rotation_about_ned_down() -> None:
@@ -196,14 +180,14 @@ def test_the_reference_yaw_is_a_rotation_about_ned_down() -> None:
         out = _by_channel(fx.LiveView().messages_for("state", _state(yaw=yaw)))
         pose = out[fx.POSE_REFERENCE]
         assert pose["frame_id"] == "ned"
-        assert _vec(pose["pose"]["position"]).tolist() == [0.5, -0.2, -1.0]
-        xyzw = _vec(pose["pose"]["orientation"], "xyzw")
+        assert vec(pose["pose"]["position"]).tolist() == [0.5, -0.2, -1.0]
+        xyzw = vec(pose["pose"]["orientation"], "xyzw")
         np.testing.assert_allclose(Rotation.from_quat(xyzw).as_matrix(),
                                    Rotation.from_euler("z", yaw).as_matrix(), atol=1e-12)
         np.testing.assert_allclose(Rotation.from_quat(xyzw).as_matrix(),
                                    dcm_from_quat(quat_from_euler(0.0, 0.0, yaw)), atol=1e-12)
     # a quarter turn points the nose (body x) east (NED y)
-    east = Rotation.from_quat(_vec(fx.yaw_quaternion(math.pi / 2), "xyzw")).apply([1, 0, 0])
+    east = Rotation.from_quat(vec(fx.yaw_quaternion(math.pi / 2), "xyzw")).apply([1, 0, 0])
     np.testing.assert_allclose(east, [0, 1, 0], atol=1e-12)
 
 
@@ -211,7 +195,7 @@ def test_world_is_ned_with_z_up() -> None:
     out = _by_channel(fx.LiveView().messages_for("state", _state()))
     world = next(tr for tr in out[fx.TF]["transforms"] if tr["child_frame_id"] == "ned")
     assert world["parent_frame_id"] == "world"
-    r = Rotation.from_quat(_vec(world["rotation"], "xyzw"))
+    r = Rotation.from_quat(vec(world["rotation"], "xyzw"))
     np.testing.assert_allclose(r.apply([0, 0, -1]), [0, 0, 1], atol=1e-12)  # 1 m up is up
     np.testing.assert_allclose(r.apply([1, 0, 0]), [1, 0, 0], atol=1e-12)  # north stays x
 
@@ -333,7 +317,7 @@ def test_sdk_messages_encode_what_the_view_says() -> None:
         sdk_schema = classes[schema].get_schema()
         assert sdk_schema.name == schema and sdk_schema.encoding == "protobuf"
         data = fx.sdk_message(schema, out[channel]).encode()
-        close(_decode(_descriptors(sdk_schema.data), schema, data), out[channel])
+        close(decode(descriptors(sdk_schema.data), schema, data), out[channel])
 
 
 # --- the missing extra ---
@@ -349,183 +333,3 @@ def test_without_the_extra_the_command_says_what_to_install(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("error: ")
     assert "pip install 'groundstation[foxglove]'" in err
-
-
-# --- live: `gs foxglove` during a real-time flight of the virtual lab ---
-
-def _free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _read_line(stream: Any, timeout: float) -> str:
-    """One line from a child's pipe within ``timeout`` seconds (AssertionError if not)."""
-    if not select.select([stream], [], [], timeout)[0]:
-        raise AssertionError(f"no line from the child within {timeout} s")
-    return str(stream.readline().decode())
-
-
-@pytest.mark.realtime
-@pytest.mark.slow
-def test_foxglove_client_sees_the_flight(tmp_path: Path) -> None:
-    pytest.importorskip("foxglove")
-    websockets = pytest.importorskip("websockets.sync.client")
-    from websockets.typing import Subprotocol
-
-    from groundstation.loop.daemon import FlightDaemon, FlightSummary
-    from groundstation.loop.supervisor import State
-    from sim_device.realtime import SimDeviceProcess
-
-    started = time.monotonic()
-    endpoint = f"tcp://127.0.0.1:{_free_tcp_port()}"
-    cfg = sim_config(**{
-        "trajectory.name": "hover", "vicon.port": free_udp_port(),
-        "telemetry.endpoint": endpoint, "telemetry.control_endpoint": None,
-        "logging.flight_log_dir": str(tmp_path), "sim.truth_file": str(tmp_path / "truth.npz"),
-    })
-    cfg_file = tmp_path / "lab.yaml"
-    cfg_file.write_text(dump_config(cfg), encoding="utf-8")
-
-    # The bridge first (its SUB socket connects before the daemon binds: zmq retries), so
-    # the client sees the flight from its start; the virtual vehicle starts meanwhile.
-    err_file = tmp_path / "bridge.err"  # a file, not a pipe nobody reads while flying
-    with err_file.open("wb") as err:
-        bridge = subprocess.Popen([*GS, "foxglove", "--endpoint", endpoint, "--port", "0",
-                                   "--duration", "90"], stdout=subprocess.PIPE, stderr=err,
-                                  cwd=REPO)
-    assert bridge.stdout is not None
-    frames: list[tuple[int, int, bytes]] = []  # (subscription, log time ns, payload)
-    out: dict[str, FlightSummary] = {}
-    runner: threading.Thread | None = None
-    try:
-        with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as device:
-            line = _read_line(bridge.stdout, 30.0)
-            assert line.startswith("foxglove: serving ws://127.0.0.1:"), (
-                line, err_file.read_text())
-            url = line.split()[2]
-            # What the Foxglove app offers: the protocol's current name and its former one
-            # (the same messages); foxglove-sdk 0.30 accepts the current one only.
-            offered = [Subprotocol("foxglove.sdk.v1"), Subprotocol("foxglove.websocket.v1")]
-            with websockets.connect(url, subprotocols=offered, open_timeout=20,
-                                    max_size=None) as ws:
-                assert ws.subprotocol == "foxglove.sdk.v1"
-                channels: dict[int, dict[str, Any]] = {}
-                deadline = time.monotonic() + 20.0
-                while set(fx.CHANNELS) - {c["topic"] for c in channels.values()}:
-                    assert time.monotonic() < deadline, channels
-                    message = json.loads(ws.recv(timeout=20.0))
-                    if message["op"] == "serverInfo":
-                        assert message["name"] == "groundstation"
-                    elif message["op"] == "advertise":
-                        channels.update({c["id"]: c for c in message["channels"]})
-                topic_of = {}
-                subscriptions = []
-                for k, (cid, channel) in enumerate(sorted(channels.items()), start=1):
-                    topic_of[k] = channel["topic"]
-                    subscriptions.append({"id": k, "channelId": cid})
-                ws.send(json.dumps({"op": "subscribe", "subscriptions": subscriptions}))
-
-                daemon = FlightDaemon(apply_overrides(cfg, {"serial.port": device.pty_path}),
-                                      duration_s=2.0)
-                runner = threading.Thread(target=lambda: out.setdefault("s", daemon.run()))
-                runner.start()
-                try:
-                    last_state_at = time.monotonic()
-                    # until the flight is over and its last messages are through
-                    while runner.is_alive() or time.monotonic() - last_state_at < 1.0:
-                        try:
-                            data = ws.recv(timeout=0.5)
-                        except TimeoutError:
-                            if time.monotonic() - last_state_at > 30.0:
-                                break
-                            continue
-                        if isinstance(data, bytes):
-                            assert data[0] == 0x01  # message data
-                            sub, log_time = struct.unpack_from("<IQ", data, 1)
-                            frames.append((sub, log_time, data[13:]))
-                            if topic_of[sub] == fx.STATE:
-                                last_state_at = time.monotonic()
-                        if time.monotonic() - started > 35.0:
-                            break
-                finally:
-                    runner.join(60.0)
-        bridge.send_signal(signal.SIGINT)  # Ctrl-C: the bridge stops cleanly, exit 0
-        assert bridge.wait(timeout=20.0) == 0, err_file.read_text()
-    finally:
-        if bridge.poll() is None:
-            bridge.kill()
-            bridge.wait(timeout=10.0)
-        bridge.stdout.close()
-    assert runner is not None and not runner.is_alive()
-    assert out["s"].final_state is State.DONE, out["s"].transitions
-
-    # advertised as the table says: typed channels in protobuf, the rest JSON
-    by_topic = {c["topic"]: c for c in channels.values()}
-    for topic, schema in fx.CHANNELS.items():
-        advertised = by_topic[topic]
-        assert advertised["schemaName"] == schema
-        assert advertised["encoding"] == ("protobuf" if schema.startswith("foxglove.")
-                                          else "json")
-    descriptors = {topic: _descriptors(base64.b64decode(c["schema"]))
-                   for topic, c in by_topic.items() if c["encoding"] == "protobuf"}
-
-    def decoded(topic: str, last: int = 0) -> list[tuple[int, dict[str, Any]]]:
-        """The messages of ``topic`` (the ``last`` ones only, if given), decoded."""
-        rows = [(t, p) for sub, t, p in frames if topic_of[sub] == topic][-last:]
-        if topic in descriptors:
-            return [(t, _decode(descriptors[topic], fx.CHANNELS[topic], p)) for t, p in rows]
-        return [(t, json.loads(p)) for t, p in rows]
-
-    # the supervisor: the flight's states in order, from the first to the last
-    names = [m["name"] for _, m in decoded(fx.SUPERVISOR)]
-    seen = [n for k, n in enumerate(names) if k == 0 or n != names[k - 1]]
-    assert "TRACK" in seen, seen
-    order = ["PREFLIGHT", "TAKEOFF", "TRACK", "LAND", "DISARM", "DONE"]
-    assert seen == [n for n in order if n in seen], seen
-    assert {"TAKEOFF", "TRACK", "LAND"} <= set(seen), seen
-
-    # log time is the telemetry's time_unix [ns]
-    states = decoded(fx.STATE)
-    assert len(states) > 50  # 20 Hz for several seconds
-    for log_time, payload in states:
-        assert log_time == fx.log_time_ns(payload["time_unix"])
-    tracking = {t for t, p in states if p["supervisor"]["name"] == "TRACK"}
-    assert len(tracking) > 20
-
-    # the poses decode with their advertised schema; while tracking, estimate ~ reference
-    estimates = dict(decoded(fx.POSE_ESTIMATE))
-    references = dict(decoded(fx.POSE_REFERENCE))
-    close = 0
-    for t in tracking:
-        est, ref = estimates[t], references[t]
-        assert est["frame_id"] == ref["frame_id"] == "ned"
-        assert est["timestamp"]["seconds"] * 10**9 + est["timestamp"].get("nanos", 0) == t
-        p_est, p_ref = _vec(est["pose"]["position"]), _vec(ref["pose"]["position"])
-        assert p_ref[2] == pytest.approx(-1.0, abs=0.05)  # hover at 1 m
-        assert np.linalg.norm(p_est - p_ref) < 0.5
-        close += int(np.linalg.norm(p_est - p_ref) < 0.15)
-        q = _vec(est["pose"]["orientation"], "xyzw")
-        assert np.linalg.norm(q) == pytest.approx(1.0, abs=1e-9)
-        assert Rotation.from_quat(q).magnitude() < 0.3  # about level, nose north
-    assert close > 0.8 * len(tracking)
-
-    # /tf: ned -> base_link follows the estimate; world -> ned is there
-    for t, msg in decoded(fx.TF):
-        frames_of = {tr["child_frame_id"]: tr for tr in msg["transforms"]}
-        assert frames_of["ned"]["parent_frame_id"] == "world"
-        if t in tracking:
-            body = frames_of["base_link"]
-            assert body["parent_frame_id"] == "ned"
-            np.testing.assert_allclose(_vec(body["translation"]),
-                                       _vec(estimates[t]["pose"]["position"]))
-
-    # the reference path: a line strip at 1 m while tracking
-    assert len([sub for sub, _, _ in frames if topic_of[sub] == fx.PATH_REFERENCE]) >= 5
-    (entity,) = decoded(fx.PATH_REFERENCE, last=1)[0][1]["entities"]
-    assert entity["frame_id"] == "ned" and entity["id"] == "reference"
-    points = entity["lines"][0]["points"]
-    assert len(points) > 20 and min(p.get("z", 0.0) for p in points) < -0.9
-    (entity,) = decoded(fx.PATH_ESTIMATE, last=1)[0][1]["entities"]
-    assert entity["id"] == "estimate" and len(entity["lines"][0]["points"]) > 20
-    assert decoded(fx.HEALTH, last=1)[0][1]["topic"] == "health"
