@@ -106,7 +106,7 @@ def test_a_long_plan_is_made_off_the_loop_and_the_commands_keep_their_rhythm(
             times["sent"] = time.monotonic()
             motion = gs.follow(FIGURE8, duration=580.0)
             times["accepted"] = time.monotonic()
-            time.sleep(4.0)  # flying it
+            time.sleep(2.0)  # flying it
             flying = gs.status()
             final = gs.land(wait=True, timeout=60.0)
             times["landed"] = time.monotonic()
@@ -150,7 +150,7 @@ def test_a_long_plan_is_made_off_the_loop_and_the_commands_keep_their_rhythm(
     # figure-eight (0.2 m wide, about its centre)
     truth = np.load(tmp_path / "truth.npz")
     t = float(truth["start_monotonic"]) + truth["t"]
-    air = (t >= times["refused_sent"]) & (t <= times["accepted"] + 4.0)
+    air = (t >= times["refused_sent"]) & (t <= times["accepted"] + 2.0)
     tilt = _tilt_deg(np.asarray(truth["quaternion"])[air])
     offset = np.linalg.norm(np.asarray(truth["position"])[air] - FIGURE8["center"], axis=1)
     assert tilt.max() < 10.0, tilt.max()
