@@ -222,15 +222,14 @@ class Flight:
             time.sleep(0.1)
         pytest.fail(f"gs fly did not answer within 60 s:\n{_tail(self.daemon_out)}")
 
-    def once(self, name: str, step: Callable[[], object], *, failed_ok: bool = False) -> None:
-        """Run ``step`` unless it ran before in this flight. A step that failed before
-        raises StepFailedError (its own test reported why), or with ``failed_ok`` is passed
-        over."""
+    def once(self, name: str, step: Callable[[], object]) -> None:
+        """Run ``step`` unless it ran before in this flight; StepFailedError if it failed
+        then (its own test reported why)."""
         if name in self._steps:
             error = self._steps[name]
-            if error is not None and not failed_ok:
+            if error is not None:
                 raise StepFailedError(f"the step {name!r} failed earlier in this flight: "
-                                 f"{type(error).__name__}: {str(error)[:300]}")
+                                      f"{type(error).__name__}: {str(error)[:300]}")
             return
         self._steps[name] = None
         try:
