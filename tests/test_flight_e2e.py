@@ -35,7 +35,9 @@ import numpy as np
 import pytest
 from lab_helpers import free_udp_port
 from scipy.spatial.transform import Rotation
-from test_foxglove import decode, descriptors, vec
+from test_foxglove import _decode as decode
+from test_foxglove import _descriptors as descriptors
+from test_foxglove import _vec as vec
 
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
 from groundstation.loop.daemon import FlightDaemon, FlightSummary

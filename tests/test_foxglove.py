@@ -1,11 +1,11 @@
 """`gs foxglove`: telemetry -> the Foxglove WebSocket protocol.
 
 The conversion is checked against independent answers (scipy's rotations, the
-protobuf wire format decoded here from the schema the SDK advertises: ``descriptors``,
-``decode``). The live test, `gs foxglove` in its own process during a real-time flight
-of the virtual lab read by a plain WebSocket client, shares the X-3D flight of
-tests/test_flight_e2e.py (``test_foxglove_client_sees_the_flight``), which uses the
-decoder below.
+protobuf wire format decoded here from the schema the SDK advertises: ``_descriptors``,
+``_decode``, which tests/test_export_mcap_viewers.py uses too). The live test, `gs
+foxglove` in its own process during a real-time flight of the virtual lab read by a plain
+WebSocket client, shares the X-3D flight of tests/test_flight_e2e.py
+(``test_foxglove_client_sees_the_flight``), which uses the decoder below.
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def _fields(data: bytes) -> list[tuple[int, int, Any]]:
     return out
 
 
-def descriptors(file_descriptor_set: bytes) -> dict[str, dict[int, tuple[str, int, str, bool]]]:
+def _descriptors(file_descriptor_set: bytes) -> dict[str, dict[int, tuple[str, int, str, bool]]]:
     """Message full name -> {field number: (name, type, type name, repeated)}, read from a
     FileDescriptorSet with the field numbers of google/protobuf/descriptor.proto."""
     out: dict[str, dict[int, tuple[str, int, str, bool]]] = {}
@@ -92,7 +92,7 @@ _SCALARS = {1: ("<d", 8), 2: ("<f", 4), 6: ("<Q", 8), 7: ("<I", 4), 15: ("<i", 4
             16: ("<q", 8)}
 
 
-def decode(descriptors: Mapping[str, Mapping[int, tuple[str, int, str, bool]]],
+def _decode(descriptors: Mapping[str, Mapping[int, tuple[str, int, str, bool]]],
             name: str, data: bytes) -> dict[str, Any]:
     """A protobuf message as a dict (absent fields absent: proto3 leaves out zeros)."""
     out: dict[str, Any] = {}
@@ -102,7 +102,7 @@ def decode(descriptors: Mapping[str, Mapping[int, tuple[str, int, str, bool]]],
         field, kind, type_name, repeated = descriptors[name][number]
         values: list[Any]
         if kind == 11:
-            values = [decode(descriptors, type_name, raw)]
+            values = [_decode(descriptors, type_name, raw)]
         elif kind == 9:
             values = [raw.decode()]
         elif kind == 12:
@@ -126,7 +126,7 @@ def decode(descriptors: Mapping[str, Mapping[int, tuple[str, int, str, bool]]],
     return out
 
 
-def vec(d: Mapping[str, Any], keys: str = "xyz") -> np.ndarray:
+def _vec(d: Mapping[str, Any], keys: str = "xyz") -> np.ndarray:
     return np.array([d.get(k, 0.0) for k in keys])
 
 
@@ -164,7 +164,7 @@ def test_the_attitude_quaternion_is_reordered_not_changed() -> None:
         q /= np.linalg.norm(q)  # scalar-first [w, x, y, z], R(q) = eCb
         out = _by_channel(view.messages_for("state", _state(quaternion=q)))
         o = out[fx.POSE_ESTIMATE]["pose"]["orientation"]
-        xyzw = vec(o, "xyzw")
+        xyzw = _vec(o, "xyzw")
         # scipy's default order is Foxglove's (scalar last); it must be the same rotation
         np.testing.assert_allclose(Rotation.from_quat(xyzw).as_matrix(), dcm_from_quat(q),
                                    atol=1e-12)
@@ -172,7 +172,7 @@ def test_the_attitude_quaternion_is_reordered_not_changed() -> None:
                                    atol=1e-12)
         body = next(tr for tr in out[fx.TF]["transforms"] if tr["child_frame_id"] == "base_link")
         assert body["parent_frame_id"] == "ned" and body["rotation"] == o
-        assert vec(body["translation"]).tolist() == [0.5, -0.2, -1.0]
+        assert _vec(body["translation"]).tolist() == [0.5, -0.2, -1.0]
 
 
 def test_the_reference_yaw_is_a_rotation_about_ned_down() -> None:
@@ -180,14 +180,14 @@ def test_the_reference_yaw_is_a_rotation_about_ned_down() -> None:
         out = _by_channel(fx.LiveView().messages_for("state", _state(yaw=yaw)))
         pose = out[fx.POSE_REFERENCE]
         assert pose["frame_id"] == "ned"
-        assert vec(pose["pose"]["position"]).tolist() == [0.5, -0.2, -1.0]
-        xyzw = vec(pose["pose"]["orientation"], "xyzw")
+        assert _vec(pose["pose"]["position"]).tolist() == [0.5, -0.2, -1.0]
+        xyzw = _vec(pose["pose"]["orientation"], "xyzw")
         np.testing.assert_allclose(Rotation.from_quat(xyzw).as_matrix(),
                                    Rotation.from_euler("z", yaw).as_matrix(), atol=1e-12)
         np.testing.assert_allclose(Rotation.from_quat(xyzw).as_matrix(),
                                    dcm_from_quat(quat_from_euler(0.0, 0.0, yaw)), atol=1e-12)
     # a quarter turn points the nose (body x) east (NED y)
-    east = Rotation.from_quat(vec(fx.yaw_quaternion(math.pi / 2), "xyzw")).apply([1, 0, 0])
+    east = Rotation.from_quat(_vec(fx.yaw_quaternion(math.pi / 2), "xyzw")).apply([1, 0, 0])
     np.testing.assert_allclose(east, [0, 1, 0], atol=1e-12)
 
 
@@ -195,7 +195,7 @@ def test_world_is_ned_with_z_up() -> None:
     out = _by_channel(fx.LiveView().messages_for("state", _state()))
     world = next(tr for tr in out[fx.TF]["transforms"] if tr["child_frame_id"] == "ned")
     assert world["parent_frame_id"] == "world"
-    r = Rotation.from_quat(vec(world["rotation"], "xyzw"))
+    r = Rotation.from_quat(_vec(world["rotation"], "xyzw"))
     np.testing.assert_allclose(r.apply([0, 0, -1]), [0, 0, 1], atol=1e-12)  # 1 m up is up
     np.testing.assert_allclose(r.apply([1, 0, 0]), [1, 0, 0], atol=1e-12)  # north stays x
 
@@ -317,7 +317,7 @@ def test_sdk_messages_encode_what_the_view_says() -> None:
         sdk_schema = classes[schema].get_schema()
         assert sdk_schema.name == schema and sdk_schema.encoding == "protobuf"
         data = fx.sdk_message(schema, out[channel]).encode()
-        close(decode(descriptors(sdk_schema.data), schema, data), out[channel])
+        close(_decode(_descriptors(sdk_schema.data), schema, data), out[channel])
 
 
 # --- the missing extra ---
