@@ -1,6 +1,6 @@
 """`gs keys`, and the run-time API commands' errors without a daemon (issue 19).
 
-Flights driven through these commands are in tests/test_api_e2e.py.
+Flights driven through these commands are in tests/test_api_flight.py.
 """
 
 from __future__ import annotations
