@@ -45,7 +45,6 @@ from groundstation.cli_options import (
 from groundstation.cli_options import ConfigOption as ConfigOption
 from groundstation.cli_options import ProtocolOption as ProtocolOption
 from groundstation.client import DEFAULT_CONTROL, DEFAULT_TELEMETRY
-from groundstation.config import Channel as ChannelName
 from groundstation.config import (
     GroundStationConfig,
     VehicleConfig,
@@ -62,6 +61,7 @@ from groundstation.errors import (
     RecorderError,
 )
 from groundstation.logs import configure_logging
+from groundstation.types import Channel as ChannelName
 
 # plain help (rich_markup_mode None): rich markup would eat "[hinf]", "[m]" and "[deg]"
 app = typer.Typer(

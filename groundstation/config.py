@@ -21,7 +21,6 @@ checked exactly like the file.
 from __future__ import annotations
 
 import copy
-import ipaddress
 import math
 import os
 import re
@@ -47,32 +46,28 @@ from pydantic import (
 from pydantic_core import CoreSchema
 from yaml.reader import ReaderError
 
+from groundstation.endpoints import host_address, local_endpoint, zmq_endpoint
 from groundstation.errors import ConfigError
-from groundstation.estimation.records import EkfParams
 from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.model.sensors import (
     ACC_SATURATION_M_S2,
     ACC_VARIANCE_TABLE_6_3,
+    GRAVITY_CHECK_DEG,
     GYRO_VARIANCE_TABLE_6_3,
+    INITIAL_STATE_VARIANCE,
     K_ACC_TABLE_6_2,
     K_GYRO_TABLE_6_2,
     VICON_POSITION_VARIANCE_TABLE_6_1,
     VICON_QUATERNION_VARIANCE_TABLE_6_1,
 )
 from groundstation.model.thrust import THRUST_POLY_EQ37
+from groundstation.types import CHANNELS, SENSOR_BLOCK_NAMES, Channel
+from groundstation.types import SensorBlockName as SensorBlock
 
 _QUAD = QuadrotorParams()
 """The vehicle model's defaults (groundstation.model.quadrotor): mass, g, rate gains,
 induced inflow, rate-loop time constant; the vehicle section below takes them from it."""
 
-CHANNELS = ("pitch", "roll", "yaw", "thrust")
-"""Channel names, in the spec's ctrl-mask bit order (bit0 pitch ... bit3 thrust)."""
-
-SENSOR_BLOCKS = ("status", "gyro", "acc", "pressure", "rc")
-"""DATA block names, in the spec's mask bit order (bit0 status ... bit4 rc)."""
-
-Channel = Literal["pitch", "roll", "yaw", "thrust"]
-SensorBlock = Literal["status", "gyro", "acc", "pressure", "rc"]
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
@@ -206,74 +201,8 @@ def _file_key(value: Path | None) -> Path | None:
 DirectoryPath = Annotated[Path, AfterValidator(_directory_key)]
 FilePath = Annotated[Path, AfterValidator(_file_key)]
 
-_HOST_LABEL = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)$")
-
-
-def _host(value: str) -> str:
-    """An IPv4 address or a host name (RFC 1123: dot-separated labels of letters, digits
-    and hyphens, at most 253 characters); ValueError naming what is wrong otherwise."""
-    try:
-        address = ipaddress.ip_address(value)
-    except ValueError:
-        address = None
-    if address is not None:
-        if address.version != 4:
-            raise ValueError("an IPv6 address: this socket is IPv4 (AF_INET); give an IPv4 "
-                             "address or a host name")
-        return value
-    labels = value.removesuffix(".").split(".")
-    if (not value or len(value) > 253 or not all(_HOST_LABEL.match(x) for x in labels)
-            or labels[-1].isdigit()):
-        raise ValueError("not an IPv4 address (0.0.0.0: every interface) or a host name "
-                         "(letters, digits, hyphens and dots)")
-    return value
-
-
-HostAddress = Annotated[str, AfterValidator(_host)]
+HostAddress = Annotated[str, AfterValidator(host_address)]
 """The address of a UDP socket (IPv4: the Vicon client and sender are AF_INET)."""
-
-IPC_PATH_MAX = 107
-"""Longest ``ipc://`` path ZeroMQ accepts on Linux [bytes]: ``sockaddr_un.sun_path`` less
-its terminating NUL."""
-
-
-def zmq_endpoint(value: str) -> str:
-    """A ZeroMQ endpoint a socket can bind: ``tcp://HOST:PORT`` (HOST ``*``, an IPv4
-    address, ``[IPv6]``, a host or interface name; PORT 1-65535 or ``*`` for any free
-    one), ``ipc://PATH`` or ``inproc://NAME``. ValueError naming what is wrong."""
-    transport, sep, address = value.partition("://")
-    if not sep or transport not in ("tcp", "ipc", "inproc"):
-        raise ValueError("must be a ZeroMQ endpoint: tcp://HOST:PORT, ipc://PATH or "
-                         "inproc://NAME")
-    if transport == "ipc":
-        if not address or "\0" in address or len(address.encode()) > IPC_PATH_MAX:
-            raise ValueError(f"ipc:// needs a path of 1-{IPC_PATH_MAX} bytes (a Unix "
-                             "socket's limit)")
-        return value
-    if transport == "inproc":
-        if not address:
-            raise ValueError("inproc:// needs a name")
-        return value
-    host, colon, port = address.rpartition(":")
-    if not colon or not host:
-        raise ValueError("tcp:// needs HOST:PORT, e.g. tcp://127.0.0.1:5556")
-    if port != "*" and not (port.isdigit() and 1 <= int(port) <= 65535):
-        raise ValueError(f"port {port!r}: a TCP port is 1-65535 (or * for any free one)")
-    if host == "*":
-        return value
-    if host.startswith("[") and host.endswith("]"):
-        try:
-            ipaddress.IPv6Address(host[1:-1])
-        except ValueError:
-            raise ValueError(f"{host}: not an IPv6 address") from None
-        return value
-    try:
-        _host(host)
-    except ValueError:
-        raise ValueError(f"host {host!r}: not *, an IPv4 address, [an IPv6 address], a host "
-                         "name or an interface name") from None
-    return value
-
 
 ZmqEndpoint = Annotated[str, AfterValidator(zmq_endpoint)]
 
@@ -360,7 +289,7 @@ def _default_sensors() -> list[SensorBlock]:
 
 
 def _all_channels() -> list[Channel]:
-    return ["pitch", "roll", "yaw", "thrust"]
+    return list(CHANNELS)
 
 
 # --------------------------------------------------------------------------- serial link
@@ -465,7 +394,7 @@ class SerialConfig(ConfigModel):
     @property
     def sensor_mask(self) -> int:
         """DATA mask bits for :attr:`sensors` (spec section 3.3)."""
-        return sum(1 << SENSOR_BLOCKS.index(name) for name in self.sensors)
+        return sum(1 << SENSOR_BLOCK_NAMES.index(name) for name in self.sensors)
 
 
 class ChannelsConfig(ConfigModel):
@@ -772,8 +701,8 @@ class EstimatorConfig(ConfigModel):
     r_override: Covariance | None = None
     # optional 7x7 (or diagonal 7) Vicon R replacing Table 6.1 [m^2, -]
     initial_covariance: Covariance = Field(
-        default_factory=lambda: [1e-4] * 3 + [1e-4] * 4 + [1e-2] * 3 + [1e-3] * 3 + [1e-1] * 3
-    )  # 16 diagonal: P, q, v, gyro bias, acc bias; loose enough for biases to settle in ~3 s
+        default_factory=lambda: list(INITIAL_STATE_VARIANCE))
+    # 16 diagonal: P, q, v, gyro bias, acc bias (model/sensors.py says what each is)
     gate_probability: Annotated[float, within(
         0.5, 1.0, "a probability: at 0.5 the gate refuses half the honest poses, at 1 it "
         "gates nothing", lo_open=True, hi_open=True)] = 0.9999
@@ -1111,7 +1040,7 @@ class SafetyConfig(ConfigModel):
     # a reference must stay this far inside volume_x/y/z (tracking error, braking room)
     gravity_check_deg: Annotated[float, within(
         0.0, 180.0, "deg: an angle between two directions is at most 180",
-        lo_open=True)] = EkfParams().gravity_check_deg
+        lo_open=True)] = GRAVITY_CHECK_DEG
     # [deg] preflight: the accelerometer's gravity must agree with the Vicon attitude
     on_signal: Literal["land", "handback"] = "land"  # what SIGINT/SIGTERM does
     on_geofence: Literal["handback", "land"] = "handback"
@@ -1168,26 +1097,6 @@ class SafetyConfig(ConfigModel):
 
 
 # --------------------------------------------------------------------------- telemetry, logging
-def local_endpoint(endpoint: str) -> bool:
-    """Whether a ZeroMQ bind endpoint reaches only this machine: TCP on a loopback address
-    (127.0.0.0/8, ``::1``, ``localhost``, the ``lo`` interface), IPC or in-process.
-    ``tcp://*:5557``, ``tcp://0.0.0.0:5557``, another address or an interface name are not."""
-    transport, sep, address = endpoint.partition("://")
-    if not sep:
-        return False
-    if transport in ("ipc", "inproc"):
-        return True
-    if transport != "tcp":
-        return False
-    host = address.rpartition(":")[0].removeprefix("[").removesuffix("]")
-    if host in ("localhost", "lo"):
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:  # "*", an interface or a host name
-        return False
-
-
 class TelemetryConfig(ConfigModel):
     """The pyzmq PUB socket, and the control socket ``gs channels`` talks to.
 

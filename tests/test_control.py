@@ -14,7 +14,8 @@ from typing import Any
 import pytest
 import zmq
 
-from groundstation.config import local_endpoint, validate_config
+from groundstation.config import validate_config
+from groundstation.endpoints import local_endpoint
 from groundstation.errors import TelemetryError
 from groundstation.loop.daemon import FlightDaemon
 from groundstation.telemetry.control import (

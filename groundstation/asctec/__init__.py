@@ -25,9 +25,7 @@ from groundstation.asctec.channels import ChannelHandover
 from groundstation.asctec.decoder import RejectedFrame, StreamDecoder, encode_frame
 from groundstation.asctec.link import ReceivedData, SerialLink
 from groundstation.asctec.messages import (
-    CHANNELS,
     MESSAGE_TYPES,
-    Channel,
     CommandMsg,
     ConfigMsg,
     DataMsg,
@@ -37,6 +35,7 @@ from groundstation.asctec.messages import (
     mask_channels,
 )
 from groundstation.asctec.stats import LinkStats
+from groundstation.types import CHANNELS, Channel
 
 __all__ = [
     "CHANNELS",

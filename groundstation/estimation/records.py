@@ -9,7 +9,7 @@ figures and the plausible volume from the ``vicon`` and ``safety`` sections; see
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -17,7 +17,9 @@ import numpy as np
 from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.model.sensors import (
     ACC_VARIANCE_TABLE_6_3,
+    GRAVITY_CHECK_DEG,
     GYRO_VARIANCE_TABLE_6_3,
+    INITIAL_STATE_VARIANCE,
     VICON_POSITION_VARIANCE_TABLE_6_1,
     VICON_QUATERNION_VARIANCE_TABLE_6_1,
 )
@@ -52,10 +54,6 @@ UpdateReason = Literal[
     "implausible",  # a position outside the plausible volume (never fused, never reset to)
     "not_initialised",  # initialise() has not been called
 ]
-
-
-def _default_p0() -> tuple[float, ...]:
-    return (1e-4,) * 3 + (1e-4,) * 4 + (1e-2,) * 3 + (1e-3,) * 3 + (1e-1,) * 3
 
 
 @dataclass(frozen=True, slots=True)
@@ -130,7 +128,7 @@ class EkfParams:
     vicon_position_var: Vec3 = VICON_POSITION_VARIANCE_TABLE_6_1
     vicon_quaternion_var: tuple[float, float, float, float] = VICON_QUATERNION_VARIANCE_TABLE_6_1
     min_measurement_var: float = 1e-9
-    initial_variance: tuple[float, ...] = field(default_factory=_default_p0)
+    initial_variance: tuple[float, ...] = INITIAL_STATE_VARIANCE
     gate_probability: float = 0.9999
     max_vicon_delay: float = 0.2
     gate_reset_after: float = 0.2
@@ -146,7 +144,7 @@ class EkfParams:
     imu_repeat_on_identical: bool = True
     init_biases_from_imu: bool = True
     stationary_gyro_std: float = 0.1
-    gravity_check_deg: float = 10.0
+    gravity_check_deg: float = GRAVITY_CHECK_DEG
 
     def __post_init__(self) -> None:
         """Validate once: shapes, positivity, probability range."""

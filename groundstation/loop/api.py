@@ -53,7 +53,6 @@ from typing import Any, ClassVar, Protocol, TypeVar
 
 import structlog
 
-from groundstation.asctec.messages import CHANNELS
 from groundstation.config import GroundStationConfig
 from groundstation.control.base import heading_of
 from groundstation.loop import boundary
@@ -81,6 +80,7 @@ from groundstation.loop.planner import (
 )
 from groundstation.loop.supervisor import State
 from groundstation.model.quaternion import rotate
+from groundstation.types import CHANNELS
 
 log = structlog.get_logger(__name__)
 

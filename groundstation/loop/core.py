@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from groundstation.asctec.channels import ChannelHandover
-from groundstation.asctec.messages import ALL_CHANNELS_MASK, Channel, CommandMsg
+from groundstation.asctec.messages import ALL_CHANNELS_MASK, CommandMsg
 from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller, heading_of
 from groundstation.control.envelope import ReferenceEnvelope
@@ -56,7 +56,15 @@ from groundstation.loop.inputs import InputHealth, VehicleStatus, quadrotor_para
 from groundstation.loop.mission import Mission
 from groundstation.loop.supervisor import Observation, State, Supervisor, SupervisorLimits
 from groundstation.model import inputs_from_sticks
-from groundstation.types import ControlOutput, ImuSample, Pose, Reference, StateEstimate, Sticks
+from groundstation.types import (
+    Channel,
+    ControlOutput,
+    ImuSample,
+    Pose,
+    Reference,
+    StateEstimate,
+    Sticks,
+)
 
 INIT_IMU_SAMPLES = 20
 """IMU samples (0.2 s at 100 Hz) averaged with the first Vicon fix to initialise."""

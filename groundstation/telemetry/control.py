@@ -50,7 +50,8 @@ from typing import Any
 import structlog
 import zmq
 
-from groundstation.config import TelemetryConfig, local_endpoint
+from groundstation.config import TelemetryConfig
+from groundstation.endpoints import local_endpoint
 from groundstation.errors import TelemetryError
 from groundstation.telemetry._zmqowner import ZmqOwner
 from groundstation.telemetry.curve import (
