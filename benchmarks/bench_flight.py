@@ -51,13 +51,13 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from groundstation.app.daemon import FlightDaemon, FlightSummary  # noqa: E402
 from groundstation.config import (  # noqa: E402
     GroundStationConfig,
     apply_overrides,
     dump_config,
     load_config,
 )
-from groundstation.loop.daemon import FlightDaemon, FlightSummary  # noqa: E402
 from sim_device.realtime import SimDeviceProcess  # noqa: E402
 from sim_device.wire import WireRecord  # noqa: E402
 

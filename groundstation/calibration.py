@@ -32,7 +32,7 @@ from scipy.stats import t as student_t
 from groundstation.asctec.dialect import open_link
 from groundstation.config import GroundStationConfig
 from groundstation.errors import GroundStationError
-from groundstation.loop.inputs import imu_scaling
+from groundstation.flight.inputs import imu_scaling
 from groundstation.types import FloatArray
 from groundstation.vicon.client import ViconClient
 

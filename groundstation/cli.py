@@ -132,7 +132,7 @@ def check_config(
     (estimator, controller, the trajectory shaped and checked against the limits and
     the volume).
     """
-    from groundstation.loop.core import FlightCore
+    from groundstation.flight.core import FlightCore
 
     if file is not None and config is not None and file != config:
         raise _fail(f"two configurations given ({file} and --config {config}): check one "
@@ -187,7 +187,7 @@ def _trajectory_check(config: GroundStationConfig) -> tuple[list[str], Any]:
     """The lines of ``config``'s trajectory check (:mod:`groundstation.control.summary`)
     and the prepared trajectory; TrajectoryError if it cannot be built."""
     from groundstation.control.summary import check_lines
-    from groundstation.loop.assemble import (
+    from groundstation.flight.assembly import (
         flight_limits_from_config,
         prepare_trajectory,
         volume_from_config,
@@ -235,7 +235,7 @@ def trajectory_command(
         typer.echo(line)
     if plot is not None:
         from groundstation.evaluation.trajectory_figure import trajectory_figure
-        from groundstation.loop.assemble import flight_limits_from_config, volume_from_config
+        from groundstation.flight.assembly import flight_limits_from_config, volume_from_config
 
         try:
             trajectory_figure(prepared.trajectory, prepared.duration_s,
@@ -296,9 +296,19 @@ def fly(
     overrides.update(_trajectory_overrides(trajectory) if trajectory is not None
                      else {"trajectory.name": None})
     cfg = load(config, overrides)
-    from groundstation.loop.flight import fly_command
+    from groundstation.app.fly import AfterFlight, fly_command
 
-    raise typer.Exit(fly_command(cfg, duration_s=duration, demo=demo))  # stdout, never blocking
+    after: list[AfterFlight] = []  # once the log is closed and the vehicle the pilot's
+    if cfg.logging.mcap:
+        from groundstation.export import mcap_after_flight
+
+        after.append(mcap_after_flight)
+    if demo:
+        from groundstation.evaluation.report import report_after_flight
+
+        after.append(report_after_flight)
+    raise typer.Exit(fly_command(cfg, duration_s=duration, demo=demo,  # stdout, never blocking
+                                 after_flight=after))
 
 
 @app.command()
@@ -320,7 +330,7 @@ def motors(
     if action not in get_args(MotorAction):
         raise _fail(f"motors: expected start or stop, got {action!r}", 2)
     cfg = load(config, {"serial.port": serial_port, "serial.protocol": protocol})
-    from groundstation.loop.motors import motor_gesture_command
+    from groundstation.app.motors import motor_gesture_command
 
     raise typer.Exit(motor_gesture_command(cfg, start=action == "start", echo=typer.echo))
 
@@ -328,7 +338,7 @@ def motors(
 def _flight_log(path: Path) -> Path:
     """``path`` if it is a flight log (a flight's directory, or its flight.npy); exit 2
     with one line naming it if it is not there or not one."""
-    from groundstation.loop.recorder import CONFIG_FILE, FLIGHT_FILE, META_FILE
+    from groundstation.app.recorder import CONFIG_FILE, FLIGHT_FILE, META_FILE
 
     if not path.exists():
         raise _fail(f"{path}: no such flight log (a flight's directory, or its "
@@ -395,7 +405,7 @@ def replay(
         "--config", "-c", help="Replay with this configuration instead of the flight's.")] = None,
 ) -> None:
     """Re-run the estimator and controller on a recorded flight; report the differences."""
-    from groundstation.loop.replay import replay_flight
+    from groundstation.app.replay import replay_flight
 
     cfg = load(config) if config is not None else None
     _flight_log(log)
@@ -910,7 +920,7 @@ def synth_hinf(
     """
     from groundstation.control.hinf import synthesise_hinf
     from groundstation.control.hinf_design import HinfWeights
-    from groundstation.loop.inputs import quadrotor_params
+    from groundstation.flight.inputs import quadrotor_params
 
     cfg = load(config)
     h = cfg.controller.hinf

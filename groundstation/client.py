@@ -18,7 +18,7 @@ CSV's ``yaw_deg`` column): ``go_to(..., yaw_deg=90)`` faces east, and the replie
 ``yaw_deg``, ``reference_yaw_deg`` and ``target_yaw_deg``. (Until this release the client
 took and reported radians: the ``yaw=`` keyword and the ``yaw``, ``reference_yaw`` and
 ``target_yaw`` attributes still work, in radians, with a DeprecationWarning. The wire
-format, :mod:`groundstation.loop.api`, stays in radians.)
+format, :mod:`groundstation.app.api`, stays in radians.)
 
 Example (``examples/fly_square.py`` flies a square)::
 
@@ -30,7 +30,7 @@ Example (``examples/fly_square.py`` flies a square)::
     gs.land(wait=True)
 
 Every request is one JSON message on the daemon's control socket
-(``telemetry.control_endpoint``; see :mod:`groundstation.loop.api` for the wire format);
+(``telemetry.control_endpoint``; see :mod:`groundstation.app.api` for the wire format);
 a daemon that authenticates clients needs ``server_key`` and ``client_key`` (CURVE).
 """
 

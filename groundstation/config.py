@@ -1149,7 +1149,7 @@ class LoggingConfig(ConfigModel):
     flight_log_dir: DirectoryPath = Path("flightlogs")
     # a directory, or one the recorder can make (with its parents)
     mcap: bool = False
-    # also write the flight as flight.mcap (gs export --format mcap) beside flight.npy
+    # gs fly also writes the flight as flight.mcap (gs export --format mcap) beside flight.npy
     # when the daemon closes its log (needs the analysis extra; the loop never waits)
 
 
@@ -1159,7 +1159,7 @@ FifoPriority = Annotated[int, within(
 
 
 class RealtimeConfig(ConfigModel):
-    """What the daemon asks of the OS while it flies (see groundstation/loop/realtime.py)."""
+    """What the daemon asks of the OS while it flies (see groundstation/app/realtime.py)."""
 
     cpu_dma_latency_us: Annotated[int, within(
         0, 10_000, "us: a wake-up latency longer than the 10 ms IMU period protects no "

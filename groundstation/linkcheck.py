@@ -11,7 +11,7 @@ by another ground station is left alone).
 What is judged, each against the figure the flight itself uses where there is one:
 
 * the DATA rate against ``serial.data_period_ms``: at least the rate the preflight
-  requires (80 % of it, :func:`~groundstation.loop.core.limits_from_config`), and no
+  requires (80 % of it, :func:`~groundstation.flight.core.limits_from_config`), and no
   silence as long as ``safety.link_loss_s`` (what a flight calls a lost link);
 * rejected frame candidates by reason (CRC, end marker, length, ...): at most
   :data:`MAX_REJECTED_SHARE` of the frames; X-3D DATA of another block mask (the LL
@@ -47,8 +47,8 @@ from groundstation.asctec.messages import DataMsg
 from groundstation.asctec.stats import LinkStats
 from groundstation.config import GroundStationConfig
 from groundstation.errors import LinkError
-from groundstation.loop.core import limits_from_config
-from groundstation.loop.inputs import imu_scaling
+from groundstation.flight.core import limits_from_config
+from groundstation.flight.inputs import imu_scaling
 
 __all__ = ["LinkCheckReport", "LinkObserver", "assess", "run_link_check"]
 

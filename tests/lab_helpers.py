@@ -7,10 +7,10 @@ from __future__ import annotations
 import socket
 from pathlib import Path
 
+from groundstation.app.inprocess import FlightResult, fly_in_process
+from groundstation.app.recorder import FlightRecorder
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.loop.inprocess import FlightResult, fly_in_process
-from groundstation.loop.recorder import FlightRecorder
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 
 REPO = Path(__file__).resolve().parents[1]
 LIVELY_WAYPOINTS = """t,x,y,z,yaw

@@ -22,8 +22,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lab_helpers import sim_config
 
-from groundstation.loop.api import MotionApi
-from groundstation.loop.commander import (
+from groundstation.app.api import MotionApi
+from groundstation.flight.commander import (
     MAX_MOTION_S,
     MIN_MOTION_S,
     Commander,
@@ -31,9 +31,9 @@ from groundstation.loop.commander import (
     check_target,
     plan_follow,
 )
-from groundstation.loop.core import FlightCore
-from groundstation.loop.planner import PlannerSettings, PrepareFollow, settings_from_config
-from groundstation.loop.supervisor import State
+from groundstation.flight.core import FlightCore
+from groundstation.flight.planner import PlannerSettings, PrepareFollow, settings_from_config
+from groundstation.flight.supervisor import State
 
 CFG = sim_config(**{"trajectory.name": "none"})
 SETTINGS: PlannerSettings = settings_from_config(CFG)

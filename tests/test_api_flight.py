@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from lab_helpers import free_udp_port
 
+from groundstation.app.daemon import FlightDaemon, FlightSummary
 from groundstation.client import (
     BadRequest,
     Client,
@@ -30,8 +31,7 @@ from groundstation.client import (
     OutsideVolume,
 )
 from groundstation.config import apply_overrides, dump_config, load_config
-from groundstation.loop.daemon import FlightDaemon, FlightSummary
-from groundstation.loop.supervisor import Outcome, State
+from groundstation.flight.supervisor import Outcome, State
 from sim_device.realtime import SimDeviceProcess
 
 REPO = Path(__file__).resolve().parents[1]

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
-from groundstation.loop.api import MotionApi
-from groundstation.loop.inprocess import InProcessFlight
-from groundstation.loop.supervisor import Outcome, State
+from groundstation.app.api import MotionApi
+from groundstation.app.inprocess import InProcessFlight
+from groundstation.flight.supervisor import Outcome, State
 
 
 @pytest.mark.slow

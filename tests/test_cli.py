@@ -40,10 +40,10 @@ def test_eval_rejects_an_unknown_scenario() -> None:
 
 @pytest.mark.slow
 def test_report_and_export_of_a_recorded_flight(tmp_path: Path) -> None:
+    from groundstation.app.inprocess import fly_in_process
+    from groundstation.app.recorder import FlightRecorder
     from groundstation.config import apply_overrides, dump_config, load_config
-    from groundstation.loop.inprocess import fly_in_process
-    from groundstation.loop.recorder import FlightRecorder
-    from groundstation.loop.supervisor import State
+    from groundstation.flight.supervisor import State
 
     cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {"trajectory.name": "hover"})
     with FlightRecorder.create(tmp_path, dump_config(cfg),
@@ -175,7 +175,7 @@ def test_check_config_refuses_a_missing_waypoint_file(tmp_path: Path) -> None:
 
 def test_fly_help_documents_every_exit_code() -> None:
     """`gs fly --help` names each exit code `gs fly` can return (issue 14 item 5)."""
-    from groundstation.loop.flight import EXIT_CODES
+    from groundstation.app.fly import EXIT_CODES
 
     result = runner.invoke(app, ["fly", "--help"], terminal_width=100)
     assert result.exit_code == 0

@@ -54,10 +54,10 @@ def test_a_users_mistake_is_one_line_and_a_code(args: tuple[str, ...], code: int
 @pytest.fixture(scope="module")
 def flight_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A short real flight log (in-process flight of the virtual lab, recorder on)."""
+    from groundstation.app.inprocess import fly_in_process
+    from groundstation.app.recorder import FlightRecorder
     from groundstation.config import apply_overrides, dump_config, load_config
-    from groundstation.loop.inprocess import fly_in_process
-    from groundstation.loop.recorder import FlightRecorder
-    from groundstation.loop.supervisor import State
+    from groundstation.flight.supervisor import State
 
     out = tmp_path_factory.mktemp("log")
     cfg = apply_overrides(load_config(ROOT / "config" / "sim.yaml"), {"trajectory.name": "hover"})

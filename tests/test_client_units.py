@@ -23,7 +23,7 @@ STATUS = {"ok": True, "state": "TRACK", "reason": "", "commanded": True,
           "estimate": {"position": [0.1, 0.2, -1.0], "velocity": [0, 0, 0], "yaw": math.pi},
           "reference": {"position": [0.0, 0.0, -1.0], "yaw": 3 * math.pi / 4},
           "ground": [0, 0, 0], "motion": MOTION, "health": {"battery_v": 11.1}}
-"""Replies as the daemon's wire format (:mod:`groundstation.loop.api`) writes them: rad."""
+"""Replies as the daemon's wire format (:mod:`groundstation.app.api`) writes them: rad."""
 
 
 @pytest.fixture

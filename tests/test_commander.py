@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
+from groundstation.app.api import MotionApi
 from groundstation.control.minjerk import smoothstep
-from groundstation.loop.api import MotionApi
-from groundstation.loop.assemble import motion_limits_from_config
-from groundstation.loop.commander import (
+from groundstation.flight.assembly import motion_limits_from_config
+from groundstation.flight.commander import (
     Commander,
     CommandRefusedError,
     MotionLimits,
@@ -28,8 +28,8 @@ from groundstation.loop.commander import (
     plan_hold,
     sample_plan,
 )
-from groundstation.loop.core import FlightCore
-from groundstation.loop.supervisor import State
+from groundstation.flight.core import FlightCore
+from groundstation.flight.supervisor import State
 
 CFG = sim_config(**{"trajectory.name": "none"})
 LIMITS: MotionLimits = motion_limits_from_config(CFG)
@@ -181,7 +181,7 @@ def test_hold_stops_a_moving_reference_smoothly_within_the_limits() -> None:
 
 def test_follow_flies_to_the_start_then_the_trajectory_with_a_continuous_heading() -> None:
     from groundstation.control.trajectory import Hover
-    from groundstation.loop.assemble import trajectory_for_flight
+    from groundstation.flight.assembly import trajectory_for_flight
 
     section = CFG.trajectory.model_copy(update={"name": "figure-eight", "period_s": 10.0,
                                                 "yaw_deg": 170.0})
@@ -280,7 +280,7 @@ def test_a_flight_with_a_configured_trajectory_refuses_motions() -> None:
 def test_follow_start_at_is_a_unix_time_converted_to_trajectory_time() -> None:
     """``start_at`` 5 s from now (the client's clock) begins the trajectory 5 s of
     trajectory time after the loop's present, whatever the planning lead."""
-    from groundstation.loop.assemble import trajectory_for_flight
+    from groundstation.flight.assembly import trajectory_for_flight
 
     core = FlightCore(CFG)
     core.supervisor.force(0.0, State.TRACK, "test")

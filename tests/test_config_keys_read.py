@@ -28,6 +28,9 @@ from lab_helpers import free_udp_port
 from pydantic import BaseModel
 from typer.testing import CliRunner
 
+from groundstation.app.api import MotionApi
+from groundstation.app.daemon import FlightDaemon
+from groundstation.app.motors import motor_gesture_command
 from groundstation.cli import app
 from groundstation.config import (
     ConfigModel,
@@ -36,10 +39,7 @@ from groundstation.config import (
     dump_config,
     load_config,
 )
-from groundstation.loop.api import MotionApi
-from groundstation.loop.core import FlightCore
-from groundstation.loop.daemon import FlightDaemon
-from groundstation.loop.motors import motor_gesture_command
+from groundstation.flight.core import FlightCore
 from groundstation.telemetry.control import ControlServer
 from sim_device.params import LabParams
 from sim_device.realtime import SimDeviceProcess

@@ -20,7 +20,7 @@ import pytest
 from groundstation.config import GroundStationConfig, load_config, validate_config
 from groundstation.errors import ConfigError
 from groundstation.estimation.records import EkfParams
-from groundstation.loop.core import FlightCore
+from groundstation.flight.core import FlightCore
 from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.model.sensors import (
     ACC_SATURATION_M_S2,

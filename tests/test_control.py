@@ -14,10 +14,10 @@ from typing import Any
 import pytest
 import zmq
 
+from groundstation.app.daemon import FlightDaemon
 from groundstation.config import validate_config
 from groundstation.endpoints import local_endpoint
 from groundstation.errors import TelemetryError
-from groundstation.loop.daemon import FlightDaemon
 from groundstation.telemetry.control import (
     FRAMES_PER_POLL,
     MAX_PARSED_BYTES,
@@ -359,7 +359,7 @@ def test_the_daemon_handler_behind_a_real_socket_survives_hostile_clients() -> N
 
 
 def test_the_flight_summary_shows_the_control_counters() -> None:
-    from groundstation.loop.flight import summary_lines
+    from groundstation.app.fly import summary_lines
 
     daemon = FlightDaemon(validate_config({}))
     summary = replace(daemon._summary(), control={"answered": 4, "malformed": 2, "refused": 1,

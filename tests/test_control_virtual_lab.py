@@ -1,6 +1,6 @@
 """Controllers in the virtual lab: the whole chain, on the simulated clock.
 
-``groundstation.loop.inprocess.fly_in_process`` flies the flight core against
+``groundstation.app.inprocess.fly_in_process`` flies the flight core against
 ``sim_device.VirtualLab``: COMMAND bytes into the virtual X-3D (rate-loop lag
 0.064 s, 20 ms command delay, motor lag, battery droop, IMU biases), DATA bytes
 and Vicon datagrams back through the decoders and the EKF. The controller sees
@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.app.inprocess import FlightResult, fly_in_process
 from groundstation.config import GroundStationConfig, apply_overrides, load_config
 from groundstation.control import (
     Controller,
@@ -24,9 +25,8 @@ from groundstation.control import (
 )
 from groundstation.control.hinf import HinfController, default_gain_path, load_hinf_gain
 from groundstation.evaluation.metrics import error_norms, rms, time_lag
-from groundstation.loop.inprocess import FlightResult, fly_in_process
-from groundstation.loop.inputs import quadrotor_params
-from groundstation.loop.supervisor import State
+from groundstation.flight.inputs import quadrotor_params
+from groundstation.flight.supervisor import State
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -28,11 +28,11 @@ import numpy as np
 import pytest
 from lab_helpers import REPO, free_udp_port
 
+from groundstation.app.daemon import FlightDaemon
+from groundstation.app.fly import EXIT_CODES, summary_lines
+from groundstation.app.recorder import LogLoss, read_flight
 from groundstation.config import apply_overrides, dump_config, load_config, validate_config
-from groundstation.loop.daemon import FlightDaemon
-from groundstation.loop.flight import EXIT_CODES, summary_lines
-from groundstation.loop.recorder import LogLoss, read_flight
-from groundstation.loop.supervisor import Outcome, State
+from groundstation.flight.supervisor import Outcome, State
 from sim_device.realtime import SimDeviceProcess
 
 GS = str(Path(sys.executable).parent / "gs")

@@ -17,7 +17,7 @@ import pytest
 
 from groundstation.evaluation.record import TRUTH_LAB, FlightRecord
 from groundstation.evaluation.scoring import flight_metrics, worst_case
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from groundstation.model.quaternion import quat_from_euler
 from sim_device.evaluation.targets import TARGETS, check_targets
 

@@ -32,7 +32,7 @@ from eval_flights import nominal, sharing_flights
 
 from groundstation.config import load_config
 from groundstation.evaluation.metrics import step_figures, track_clock
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from sim_device.evaluation import EvalReport, run_eval
 from sim_device.evaluation.runner import simulate_model
 from sim_device.evaluation.scenarios import STEP_TIME_S, THESIS, select

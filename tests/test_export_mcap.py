@@ -22,8 +22,8 @@ import pytest
 from lab_helpers import fly_logged, sim_config
 from mcap.reader import make_reader
 
+from groundstation.app.recorder import RECORD_DTYPE, read_flight
 from groundstation.export import CHANNELS, FOXGLOVE_TOPICS
-from groundstation.loop.recorder import RECORD_DTYPE, read_flight
 
 REPO = Path(__file__).resolve().parents[1]
 

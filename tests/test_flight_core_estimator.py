@@ -8,7 +8,7 @@ from ekf_truth import SensorNoise, TruthSimulator, square_reference
 
 from groundstation.config import validate_config
 from groundstation.estimation import Ekf, EkfParams, Estimator, PoseHoldEstimator
-from groundstation.loop.core import INIT_IMU_SAMPLES, FlightCore
+from groundstation.flight.core import INIT_IMU_SAMPLES, FlightCore
 from groundstation.types import ImuSample, Pose
 
 

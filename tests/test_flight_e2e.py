@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 from lab_helpers import free_udp_port
 
+from groundstation.app.daemon import FlightDaemon, FlightSummary
+from groundstation.app.fly import fly_command
+from groundstation.app.recorder import read_flight
 from groundstation.config import apply_overrides, dump_config, load_config
-from groundstation.loop.daemon import FlightDaemon, FlightSummary
-from groundstation.loop.flight import fly_command
-from groundstation.loop.recorder import read_flight
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from groundstation.telemetry.client import TelemetryClient
 from groundstation.telemetry.control import send_request
 from sim_device.realtime import SimDeviceProcess
@@ -136,14 +136,18 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     assert np.all((rows["battery_v"] > 11.7) & (rows["battery_v"] <= 11.8))
     tracking = rows["state"] == int(State.TRACK)
     assert np.all(rows["vehicle_flags"][tracking] & 0x01)  # the X-3D applied our commands
-    # logging.mcap: the flight as MCAP beside its log, every JSON channel decoding as JSON
-    # (the poses and transforms are Foxglove's protobuf schemas)
+    # logging.mcap: the step gs fly runs after the flight writes it as MCAP beside its log,
+    # every JSON channel decoding as JSON (the poses and transforms are Foxglove's
+    # protobuf schemas)
     import json
 
     from mcap.reader import make_reader
 
-    assert summary.mcap == str(Path(summary.log_dir) / "flight.mcap")
-    with open(summary.mcap, "rb") as fh:
+    from groundstation.export import mcap_after_flight
+
+    mcap = Path(summary.log_dir) / "flight.mcap"
+    assert mcap_after_flight(Path(summary.log_dir)) == [f"  MCAP (logging.mcap): {mcap}"]
+    with open(mcap, "rb") as fh:
         reader = make_reader(fh)
         per_topic: dict[str, int] = {}
         for _schema, channel, message in reader.iter_messages():

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.app.inprocess import Event, FlightResult, InProcessFlight, fly_in_process
+from groundstation.app.recorder import FlightRecorder, read_flight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.loop.inprocess import Event, FlightResult, InProcessFlight, fly_in_process
-from groundstation.loop.recorder import FlightRecorder, read_flight
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from groundstation.types import CHANNELS, Sticks
 from sim_device.lab import VirtualLab
 

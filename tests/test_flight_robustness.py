@@ -34,11 +34,11 @@ import pytest
 from lab_helpers import free_udp_port
 from structlog.testing import capture_logs
 
+from groundstation.app.daemon import FlightDaemon
+from groundstation.app.fly import fly_command
+from groundstation.app.recorder import read_flight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.loop.daemon import FlightDaemon
-from groundstation.loop.flight import fly_command
-from groundstation.loop.recorder import read_flight
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from sim_device.realtime import SimDeviceProcess, SimDeviceThread
 
 REPO = Path(__file__).resolve().parents[1]

@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.app.inprocess import FlightResult, InProcessFlight
 from groundstation.config import GroundStationConfig, apply_overrides, load_config
-from groundstation.loop.inprocess import FlightResult, InProcessFlight
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from groundstation.vicon.decoder import ObjectPose, encode_datagram
 from groundstation.vicon.frames import FrameConversion
 from groundstation.vicon.health import ViconHealth

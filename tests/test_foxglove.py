@@ -373,8 +373,8 @@ def test_foxglove_client_sees_the_flight(tmp_path: Path) -> None:
     websockets = pytest.importorskip("websockets.sync.client")
     from websockets.typing import Subprotocol
 
-    from groundstation.loop.daemon import FlightDaemon, FlightSummary
-    from groundstation.loop.supervisor import State
+    from groundstation.app.daemon import FlightDaemon, FlightSummary
+    from groundstation.flight.supervisor import State
     from sim_device.realtime import SimDeviceProcess
 
     started = time.monotonic()

@@ -18,11 +18,11 @@ from lab_helpers import sim_config
 from scipy.optimize import brentq
 from typer.testing import CliRunner
 
+from groundstation.app.inprocess import fly_in_process
 from groundstation.cli import app
 from groundstation.errors import IdentificationError
+from groundstation.flight.supervisor import State
 from groundstation.identification.lift import thrust_from_hover_stick
-from groundstation.loop.inprocess import fly_in_process
-from groundstation.loop.supervisor import State
 
 POLY = (2.073e-10, -1.143e-6, -1.054e-3, -0.903)  # eq. 3.7 [N], body z (negative up)
 MASS, G = 0.60, 9.82

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from lab_helpers import fly_logged, sim_config
 
+from groundstation.app.inprocess import FlightResult
 from groundstation.control.excitation import (
     LIMIT_SHARE,
     identification_flight,
@@ -26,10 +27,9 @@ from groundstation.control.excitation import (
 )
 from groundstation.control.feasibility import FlightLimits, Volume
 from groundstation.errors import IdentificationError, TrajectoryError
+from groundstation.flight.assembly import flight_limits_from_config, prepare_trajectory
 from groundstation.identification import identify_rates, identify_scales
 from groundstation.identification.lift import identify_inflow_log, identify_thrust_log
-from groundstation.loop.assemble import flight_limits_from_config, prepare_trajectory
-from groundstation.loop.inprocess import FlightResult
 from sim_device.lab import VirtualLab
 
 G = 9.82

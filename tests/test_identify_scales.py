@@ -17,12 +17,12 @@ import pytest
 from lab_helpers import LIVELY_WAYPOINTS as WAYPOINTS
 from lab_helpers import fly_logged, sim_config
 
+from groundstation.app.inprocess import FlightResult
+from groundstation.app.recorder import FLIGHT_FILE
 from groundstation.config import apply_overrides, load_config
 from groundstation.errors import IdentificationError
+from groundstation.flight.supervisor import State
 from groundstation.identification import SCALE_AXES, identify_scales
-from groundstation.loop.inprocess import FlightResult
-from groundstation.loop.recorder import FLIGHT_FILE
-from groundstation.loop.supervisor import State
 from sim_device.lab import VirtualLab
 
 REPO = Path(__file__).resolve().parents[1]

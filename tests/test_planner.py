@@ -26,8 +26,10 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
-from groundstation.loop.commander import Commander, CommandRefusedError
-from groundstation.loop.planner import (
+from groundstation.app.planner_process import PLANNER_NICE, PlannerProcess
+from groundstation.app.realtime import CollectorPacer, fifo_priority
+from groundstation.flight.commander import Commander, CommandRefusedError
+from groundstation.flight.planner import (
     GoTo,
     InlinePlanner,
     PlanMotion,
@@ -35,8 +37,6 @@ from groundstation.loop.planner import (
     PlannerSettings,
     settings_from_config,
 )
-from groundstation.loop.planner_process import PLANNER_NICE, PlannerProcess
-from groundstation.loop.realtime import CollectorPacer, fifo_priority
 
 SETTINGS = settings_from_config(sim_config(**{"trajectory.name": "none"}))
 HOME = np.array([0.0, 0.0, -1.0])

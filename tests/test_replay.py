@@ -7,12 +7,12 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from groundstation.app.inprocess import fly_in_process
+from groundstation.app.recorder import FlightRecorder
+from groundstation.app.replay import replay_flight
 from groundstation.cli import app
 from groundstation.config import apply_overrides, dump_config, load_config
-from groundstation.loop.inprocess import fly_in_process
-from groundstation.loop.recorder import FlightRecorder
-from groundstation.loop.replay import replay_flight
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -22,10 +22,10 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
+from groundstation.app.inprocess import FlightResult, InProcessFlight, fly_in_process
 from groundstation.config import GroundStationConfig
 from groundstation.control.trajectory import FigureEight
-from groundstation.loop.inprocess import FlightResult, InProcessFlight, fly_in_process
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from groundstation.types import Reference
 
 TRACKED_FAR = {"sim.vicon.volume_x": [-20.0, 20.0], "sim.vicon.volume_y": [-20.0, 20.0],

@@ -8,7 +8,7 @@ import math
 import pytest
 from structlog.testing import capture_logs
 
-from groundstation.loop.supervisor import (
+from groundstation.flight.supervisor import (
     Observation,
     Outcome,
     State,
@@ -281,7 +281,7 @@ def test_a_takeoff_that_does_not_complete_lands_after_the_timeout() -> None:
 
 def test_the_takeoff_timeout_comes_from_the_configuration() -> None:
     from groundstation.config import validate_config
-    from groundstation.loop.core import limits_from_config
+    from groundstation.flight.core import limits_from_config
 
     cfg = validate_config({"safety": {"takeoff_timeout_s": 7.5}})
     assert limits_from_config(cfg).takeoff_timeout_s == 7.5

@@ -18,7 +18,7 @@ from groundstation.control import (
 )
 from groundstation.control.shaping import TimeWarp
 from groundstation.errors import TrajectoryError
-from groundstation.loop.assemble import trajectory_for_flight
+from groundstation.flight.assembly import trajectory_for_flight
 from groundstation.model import QuadrotorParams, ThrustMap
 
 

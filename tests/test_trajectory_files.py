@@ -25,7 +25,7 @@ from groundstation.control.shaping import MinJerkPath, TimeWarp, fit_if_dense, s
 from groundstation.control.splines import FittedPath
 from groundstation.control.trajectories import load_trajectory_file, load_waypoints
 from groundstation.errors import TrajectoryError
-from groundstation.loop.assemble import trajectory_for_flight
+from groundstation.flight.assembly import trajectory_for_flight
 
 DATA = Path(__file__).resolve().parent / "data"
 G = 9.82

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
+from groundstation.app.inprocess import fly_in_process
 from groundstation.evaluation.record import align_truth
-from groundstation.loop.inprocess import fly_in_process
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 
 FIGURE8 = Path(__file__).resolve().parent / "data" / "figure8.csv"
 

@@ -40,7 +40,7 @@ from groundstation.asctec.ll_link import PollSchedule
 from groundstation.asctec.messages import CommandMsg, ConfigMsg, DataMsg
 from groundstation.config import validate_config
 from groundstation.errors import ConfigError
-from groundstation.loop.inputs import DataFrontEnd, VehicleStatus
+from groundstation.flight.inputs import DataFrontEnd, VehicleStatus
 from groundstation.types import Sticks
 
 DIALECTS = ["x3d", "asctec-ll"]

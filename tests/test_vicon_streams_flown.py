@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
-from groundstation.loop.inprocess import FlightResult, InProcessFlight, fly_in_process
-from groundstation.loop.supervisor import State
+from groundstation.app.inprocess import FlightResult, InProcessFlight, fly_in_process
+from groundstation.flight.supervisor import State
 from groundstation.vicon.decoder import ObjectPose, encode_datagram
 from groundstation.vicon.frames import FrameConversion
 from sim_device.vicon import foreign_stream

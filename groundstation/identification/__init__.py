@@ -12,7 +12,7 @@ The flight that feeds them is the identification flight, ``gs fly --trajectory s
 configured limits, climbs and descents); a refusal for want of excitation recommends
 it (:data:`~groundstation.identification.rates.SYSID_HINT`), and its log passes them all.
 
-Both read a flight directory written by :class:`groundstation.loop.recorder.FlightRecorder`
+Both read a flight directory written by :class:`groundstation.app.recorder.FlightRecorder`
 and its configuration, return frozen records with ``config_fields()`` (values keyed by
 the configuration's field paths), ``summary()`` and ``figure(path)``, and raise
 :class:`~groundstation.errors.IdentificationError` (a

@@ -27,12 +27,12 @@ from typing import Any
 import numpy as np
 import yaml
 
+from groundstation.app.recorder import read_flight
 from groundstation.config import validate_config
 from groundstation.errors import IdentificationError
+from groundstation.flight.inputs import quadrotor_params
+from groundstation.flight.supervisor import AIRBORNE
 from groundstation.identification.rates import SYSID_HINT
-from groundstation.loop.inputs import quadrotor_params
-from groundstation.loop.recorder import read_flight
-from groundstation.loop.supervisor import AIRBORNE
 from groundstation.model.linear import hover_model
 from groundstation.model.quadrotor import QuadrotorModel, inputs_from_sticks
 from groundstation.types import FloatArray, Sticks

@@ -14,14 +14,14 @@ Wire format, one JSON object per message (UTF-8, one frame, at most
   ``{"ok": false, "error": "why", "kind": kind}``. Every error reply has a ``kind``:
   ``request`` for one that is not one frame of UTF-8 JSON holding an object (and the
   handler's refusals of malformed requests), ``internal`` when the handler failed (a
-  fault of ours, logged), or the handler's own (:mod:`groundstation.loop.api`: state,
+  fault of ours, logged), or the handler's own (:mod:`groundstation.app.api`: state,
   volume, infeasible, busy).
 
 Nothing a client sends may crash, stall or wedge the flight loop (issue 14):
 
 * The daemon answers requests in a thread of its own (:meth:`ControlServer.serve`);
   a request that needs the flight is handed to the loop, which runs it between two
-  ticks (:mod:`groundstation.loop.api`), so no client ever delays a tick.
+  ticks (:mod:`groundstation.app.api`), so no client ever delays a tick.
   :meth:`ControlServer.poll` handles at most one request and never blocks; a
   multipart message is drained :data:`FRAMES_PER_POLL` frames a poll.
 * Every path through a poll is inside one error boundary: a request that is not

@@ -34,7 +34,7 @@ from groundstation.evaluation.plotting import (
     top_view,
 )
 from groundstation.evaluation.record import FlightRecord
-from groundstation.loop.supervisor import AIRBORNE, State
+from groundstation.flight.supervisor import AIRBORNE, State
 from sim_device.evaluation.figures_disturbances import disturbance_figures
 from sim_device.evaluation.figures_inputs import input_figures
 from sim_device.evaluation.figures_issue13 import issue13_figures

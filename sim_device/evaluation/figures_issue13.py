@@ -23,7 +23,7 @@ from groundstation.evaluation.metrics import (
 )
 from groundstation.evaluation.plotting import REF_STYLE, TRUTH_STYLE, pyplot, save, since, top_view
 from groundstation.evaluation.record import FlightRecord
-from groundstation.loop.supervisor import AIRBORNE, State
+from groundstation.flight.supervisor import AIRBORNE, State
 from sim_device.evaluation.scenarios import EIGHT
 
 Records = Mapping[str, FlightRecord]

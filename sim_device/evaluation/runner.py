@@ -1,14 +1,14 @@
 """Fly one scenario: in-process on the simulated clock, or in real time over pty and UDP.
 
-Both runners build the same :class:`~groundstation.loop.core.FlightCore` from
+Both runners build the same :class:`~groundstation.flight.core.FlightCore` from
 :func:`~sim_device.evaluation.scenarios.scenario_config` (trajectory,
 controller, duration) and return a :class:`FlightRecord`:
 
-* :func:`run_in_process` flies :class:`~groundstation.loop.inprocess.InProcessFlight`
+* :func:`run_in_process` flies :class:`~groundstation.app.inprocess.InProcessFlight`
   and times every ``FlightCore.tick`` with ``time.perf_counter`` (the code's
   back-to-back cost, not a real-time figure);
 * :func:`run_real_time` starts the virtual lab (``gs sim-device``) in a child
-  process, flies :class:`~groundstation.loop.daemon.FlightDaemon` against it in
+  process, flies :class:`~groundstation.app.daemon.FlightDaemon` against it in
   real time, then reads the flight log and the lab's truth file, aligned on the
   monotonic clock. Timing comes from the log (compute, jitter, latency).
 
@@ -27,15 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
+from groundstation.app.daemon import FlightDaemon
+from groundstation.app.inprocess import InProcessFlight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config
 from groundstation.control.simulate import SimPlant, SimResult, simulate
 from groundstation.errors import GroundStationError
 from groundstation.evaluation.record import FlightRecord, record_from_log, record_from_trace
-from groundstation.loop.assemble import controller_from_config
-from groundstation.loop.core import FlightCore, TickResult
-from groundstation.loop.daemon import FlightDaemon
-from groundstation.loop.inprocess import InProcessFlight
-from groundstation.loop.inputs import InputHealth, VehicleStatus, quadrotor_params
+from groundstation.flight.assembly import controller_from_config
+from groundstation.flight.core import FlightCore, TickResult
+from groundstation.flight.inputs import InputHealth, VehicleStatus, quadrotor_params
 from groundstation.types import ImuSample, Pose
 from sim_device.config import sim_section
 from sim_device.evaluation.scenarios import (

@@ -4,7 +4,7 @@ A :class:`Scenario` names a trajectory, a controller, the Vicon rate, how long t
 trajectory is flown and the configuration overrides that inject faults. The
 runners (:mod:`sim_device.evaluation.runner`) turn one into a flight, in-process
 on the simulated clock or in real time over the pty and UDP; both fly the same
-:class:`~groundstation.loop.core.FlightCore` with the same configuration.
+:class:`~groundstation.flight.core.FlightCore` with the same configuration.
 
 Choices where the thesis leaves room (each stated in the report):
 

@@ -3,7 +3,7 @@
 Owns every thread, socket and clock of a flight: the serial link (reader and
 keep-alive threads), the Vicon client (reader thread), the flight recorder, the
 telemetry publisher, systemd notification and the signal handlers. Each tick it
-hands the sans-IO :class:`~groundstation.loop.core.FlightCore` one DATA sample
+hands the sans-IO :class:`~groundstation.flight.core.FlightCore` one DATA sample
 and the Vicon poses that arrived since the last tick.
 
 Scheduling: one tick per DATA sample (100 Hz). If no DATA arrives within 1.5
@@ -27,10 +27,10 @@ drop into deep idle states between DATA samples, shortens the interpreter's thre
 switch interval to ``realtime.switch_interval_ms`` (0.5 ms; default 5 ms) so a
 reader thread holding the GIL cannot delay a tick by more, and paces the garbage
 collector (``realtime.paced_gc``): start-up objects frozen, full collections only
-right after a COMMAND went out (see :mod:`groundstation.loop.realtime`).
+right after a COMMAND went out (see :mod:`groundstation.app.realtime`).
 
 Stopping: the first stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT: see
-:mod:`groundstation.loop.signals`) asks the supervisor to land (or hand back, see
+:mod:`groundstation.app.signals`) asks the supervisor to land (or hand back, see
 ``safety.on_signal``); a second one at least ``safety.second_signal_after_s``
 (0.5 s) later hands back at once, closer ones are the same request (GNU
 ``timeout`` signals the process and then its group within a millisecond). A
@@ -65,37 +65,36 @@ from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import asdict, dataclass, field
 from functools import partial
-from pathlib import Path
 
 import numpy as np
 import structlog
 
-from groundstation.asctec.dialect import VehicleLink, open_link
-from groundstation.asctec.stats import LinkStats
-from groundstation.config import GroundStationConfig, dump_config
-from groundstation.control.base import Controller
-from groundstation.control.trajectory import Trajectory
-from groundstation.errors import LinkError
-from groundstation.logs import log_through_sink
-from groundstation.loop.api import LoopInbox, MotionApi
-from groundstation.loop.core import FlightCore, TickResult
-from groundstation.loop.inputs import DataFrontEnd, VehicleStatus, with_vicon
-from groundstation.loop.logdir import create_flight_log
-from groundstation.loop.planner import settings_from_config
-from groundstation.loop.planner_process import PlannerProcess
-from groundstation.loop.realtime import (
+from groundstation.app.api import LoopInbox, MotionApi
+from groundstation.app.logdir import create_flight_log
+from groundstation.app.planner_process import PlannerProcess
+from groundstation.app.realtime import (
     CollectorPacer,
     CollectorStats,
     cpu_latency_request,
     fifo_priority,
     switch_interval,
 )
-from groundstation.loop.recorder import FlightRecorder, LogLoss
-from groundstation.loop.sdnotify import SdNotifier
-from groundstation.loop.signals import HANGUP_SIGNALS, StopRequests, on_stop_signals
-from groundstation.loop.supervisor import FailsafeEvent, Outcome, State, Transition
-from groundstation.loop.ticklog import TickLogger
-from groundstation.loop.timing import TimingHistogram
+from groundstation.app.recorder import FlightRecorder, LogLoss
+from groundstation.app.sdnotify import SdNotifier
+from groundstation.app.signals import HANGUP_SIGNALS, StopRequests, on_stop_signals
+from groundstation.app.ticklog import TickLogger
+from groundstation.app.timing import TimingHistogram
+from groundstation.asctec.dialect import VehicleLink, open_link
+from groundstation.asctec.stats import LinkStats
+from groundstation.config import GroundStationConfig, dump_config
+from groundstation.control.base import Controller
+from groundstation.control.trajectory import Trajectory
+from groundstation.errors import LinkError
+from groundstation.flight.core import FlightCore, TickResult
+from groundstation.flight.inputs import DataFrontEnd, VehicleStatus, with_vicon
+from groundstation.flight.planner import settings_from_config
+from groundstation.flight.supervisor import FailsafeEvent, Outcome, State, Transition
+from groundstation.logs import log_through_sink
 from groundstation.telemetry.control import ControlServer, Reply, Request
 from groundstation.telemetry.publisher import TelemetryPublisher
 from groundstation.telemetry.schema import health_payload, state_payload
@@ -165,8 +164,6 @@ class FlightSummary:
     link: LinkStats | None = None
     protocol: str = "x3d"
     baud: int = 57600
-    mcap: str = ""
-    """With ``logging.mcap``: the flight's MCAP file, or why it was not written."""
     log: LogLoss = field(default_factory=LogLoss)
 
     @property
@@ -318,8 +315,6 @@ class FlightDaemon:
             summary = self._summary(recorder.loss())
             recorder.meta["outcome"] = _outcome_meta(summary)
         summary.log = recorder.loss()  # now with meta.json's fate
-        if cfg.logging.mcap and self.log_dir:  # the log is closed: the vehicle is the pilot's
-            summary.mcap = _write_mcap(Path(self.log_dir))
         return summary
 
     # ------------------------------------------------------------------ the loop
@@ -376,7 +371,7 @@ class FlightDaemon:
         ticklog.record(start, rx.msg if rx is not None else None, imu, poses, result,
                        compute=compute, jitter=start - scheduled, latency=latency)
         io.telemetry.maybe_publish(start, partial(self._snapshot, result, link, io.vicon))
-        self._inbox.run_pending()  # run-time requests, between ticks (loop/api.py)
+        self._inbox.run_pending()  # run-time requests, between ticks (app/api.py)
         if clock.wd_interval is not None and start >= clock.next_wd:
             io.notifier.watchdog()
             clock.next_wd = start + clock.wd_interval / 2
@@ -420,7 +415,7 @@ class FlightDaemon:
             s.track_max = max(s.track_max, err)
 
     def handle_request(self, request: Request) -> Reply:
-        """Answer one run-time request (:mod:`groundstation.loop.api`): status, motions,
+        """Answer one run-time request (:mod:`groundstation.app.api`): status, motions,
         land, channels. Runs in the control socket's thread; what touches the flight runs
         in the loop between two ticks."""
         return self._api.handle(request)
@@ -617,20 +612,6 @@ def link_figures(summary: FlightSummary) -> LinkFigures | None:
         summary.protocol, seconds, stats.bytes_in / seconds, stats.bytes_out / seconds,
         stats.bytes_in / seconds / line, stats.bytes_out / seconds / line,
         sum(stats.rejections.values()), stats.unexpected_data, **ll)  # type: ignore[arg-type]
-
-
-def _write_mcap(log_dir: Path) -> str:
-    """``log_dir/flight.mcap`` from the closed flight log (``logging.mcap``); its path, or
-    why it was not written (logged: a flight's MCAP is a convenience, its log the record)."""
-    from groundstation.export import export_mcap
-
-    out = log_dir / "flight.mcap"
-    try:
-        export_mcap(log_dir, out)
-    except Exception as exc:  # the flight is over and its log safe: only the copy is lost
-        log.warning("flight.mcap not written", error=str(exc))
-        return f"not written: {exc}"
-    return str(out)
 
 
 def _drain(vicon: ViconClient) -> list[Pose]:

@@ -23,12 +23,12 @@ from dataclasses import dataclass
 import numpy as np
 import yaml
 
+from groundstation.app.recorder import read_flight
 from groundstation.config import GroundStationConfig, validate_config
 from groundstation.control.sticks import StickParams, to_sticks
-from groundstation.loop.core import FlightCore
-from groundstation.loop.inputs import quadrotor_params
-from groundstation.loop.recorder import read_flight
-from groundstation.loop.supervisor import State
+from groundstation.flight.core import FlightCore
+from groundstation.flight.inputs import quadrotor_params
+from groundstation.flight.supervisor import State
 from groundstation.model import inputs_from_sticks
 from groundstation.model.quaternion import conjugate, multiply
 from groundstation.types import ControlOutput, ImuSample, Pose, Reference, StateEstimate, Sticks

@@ -6,11 +6,11 @@ an integer of thousands of digits, ``NaN``, ``Infinity`` or ``1e308``. Each fiel
 refused here with ``kind: request`` and a reason unless it is a JSON number a float
 holds exactly enough (an integer within +-2^53, a finite float) and within its physical
 range: headings within one turn, durations and periods within
-[:data:`~groundstation.loop.commander.MIN_MOTION_S`,
-:data:`~groundstation.loop.commander.MAX_MOTION_S`], ``start_at`` within
+[:data:`~groundstation.flight.commander.MIN_MOTION_S`,
+:data:`~groundstation.flight.commander.MAX_MOTION_S`], ``start_at`` within
 ``api.start_horizon_s`` of now, sizes no larger than the flight volume. Positions must
 lie inside the volume (``kind: volume``, the rule of
-:func:`~groundstation.loop.commander.check_target`). Units: NED [m], headings [rad],
+:func:`~groundstation.flight.commander.check_target`). Units: NED [m], headings [rad],
 times [s].
 """
 
@@ -24,7 +24,7 @@ from pydantic import ValidationError
 
 from groundstation.config import TrajectoryConfig, describe_problems
 from groundstation.control.feasibility import Volume
-from groundstation.loop.commander import (
+from groundstation.flight.commander import (
     MAX_MOTION_S,
     MIN_MOTION_S,
     CommandRefusedError,

@@ -11,7 +11,7 @@ Returns the process exit code (:data:`EXIT_CODES`, printed by ``gs fly --help``)
    connected;
 3. could not start: a resource could not be opened (the serial port absent or in use
    by another flight, the Vicon or telemetry port taken, no flight-log directory
-   writable: the configured one, else a user's, :mod:`groundstation.loop.logdir`);
+   writable: the configured one, else a user's, :mod:`groundstation.app.logdir`);
    nothing was sent to the vehicle;
 4. stopped on request (SIGINT/SIGTERM, SIGHUP: the terminal went away, SIGQUIT) without
    a failsafe: landed, or handed back at a second request or as ``safety.on_signal``
@@ -34,23 +34,30 @@ import math
 import shutil
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from pathlib import Path
 
-from groundstation.config import GroundStationConfig, apply_overrides
-from groundstation.errors import ConfigError, GroundStationError
-from groundstation.logs import LineSink, log_through_sink, retire_lost_stream, stream_writer
-from groundstation.loop.core import FlightCore
-from groundstation.loop.daemon import (
+from groundstation.app.daemon import (
     EXIT_LOG_INCOMPLETE,
     FlightDaemon,
     FlightSummary,
     link_figures,
 )
-from groundstation.loop.supervisor import Outcome
+from groundstation.config import GroundStationConfig, apply_overrides
+from groundstation.errors import ConfigError, GroundStationError
+from groundstation.flight.core import FlightCore
+from groundstation.flight.supervisor import Outcome
+from groundstation.logs import LineSink, log_through_sink, retire_lost_stream, stream_writer
 
 Echo = Callable[[str], None]
+
+AfterFlight = Callable[[Path, Path | None], list[str]]
+"""A step run once a flight's log is closed and the vehicle is the pilot's: given the
+flight-log directory and the virtual lab's truth file (None without one), the lines to
+print. The CLI hands them in: the MCAP copy (``logging.mcap``,
+:func:`groundstation.export.mcap_after_flight`) and, with ``--demo``, the flight's report
+(:func:`groundstation.evaluation.report.report_after_flight`)."""
 
 EXIT_USAGE = 2
 EXIT_NOT_STARTED = 3
@@ -123,15 +130,16 @@ def summary_lines(summary: FlightSummary) -> list[str]:
                          f"acknowledgements {link.acks} ({link.acks_missing} missing), "
                          f"command->ack p50/p99 {link.ack_p50_ms:.1f}/{link.ack_p99_ms:.1f} ms")
     lines.append(f"  flight log: {summary.log_dir}")
-    if summary.mcap:
-        lines.append(f"  MCAP (logging.mcap): {summary.mcap}")
     return lines
 
 
 def fly_command(config: GroundStationConfig, *, duration_s: float | None = None,
-                demo: bool = False, echo: Echo | None = None) -> int:
-    """Fly once; with ``demo`` start the virtual lab first and plot the result.
-    Returns the exit code (see the module docstring).
+                demo: bool = False, echo: Echo | None = None,
+                after_flight: Sequence[AfterFlight] = ()) -> int:
+    """Fly once; with ``demo`` start the virtual lab first (its truth is kept in the
+    flight's log as ``truth.npz``). Then run the ``after_flight`` steps in order and print
+    their lines. Returns the flight's exit code (see the module docstring): an
+    after-flight step changes none.
 
     echo : where the lines go (default: this process's stdout, written below Python's
         buffers, see :func:`~groundstation.logs.fd_writer`); called from a thread of
@@ -142,7 +150,7 @@ def fly_command(config: GroundStationConfig, *, duration_s: float | None = None,
     out = LineSink(stream_writer(stdout) if echo is None else echo, "stdout")
     try:
         with log_through_sink():
-            return _fly(config, duration_s, demo, out.put)
+            return _fly(config, duration_s, demo, out.put, after_flight)
     finally:
         out.close()
         if echo is None:
@@ -150,7 +158,7 @@ def fly_command(config: GroundStationConfig, *, duration_s: float | None = None,
 
 
 def _fly(config: GroundStationConfig, duration_s: float | None, demo: bool,
-         echo: Echo) -> int:
+         echo: Echo, after_flight: Sequence[AfterFlight]) -> int:
     try:  # the checks `gs check-config` runs, before anything is connected; the daemon
         # builds the core again (about 50 ms) for the configuration it flies
         FlightCore(config, duration_s=duration_s)
@@ -180,8 +188,11 @@ def _fly(config: GroundStationConfig, duration_s: float | None, demo: bool,
             stack.close()  # the lab stops and writes its truth
         for line in summary_lines(summary):
             echo(line)
-        if demo and summary.log_dir:
-            _report(summary.log_dir, truth_file, echo)
+        if summary.log_dir:
+            log_dir = Path(summary.log_dir)
+            truth = _keep_truth(log_dir, truth_file)
+            for step in after_flight:
+                _after(step, log_dir, truth, echo)
     return summary.exit_code
 
 
@@ -205,25 +216,23 @@ def _start_virtual_lab(config: GroundStationConfig, stack: ExitStack, workdir: P
     return apply_overrides(config, {"serial.port": lab.serial_port}), lab.truth_file
 
 
-def _report(log_dir: str, truth_file: Path | None, echo: Echo) -> None:
-    """Keep the virtual lab's truth in the flight's directory (``truth.npz``) and write the
-    flight's report (``gs report``) judged against it: ``report/`` with metrics.json,
-    report.md and flight.png (the figure only where matplotlib is installed)."""
-    from groundstation.evaluation.report import report_flight
+def _keep_truth(log_dir: Path, truth_file: Path | None) -> Path | None:
+    """Keep the virtual lab's truth in the flight's directory (``truth.npz``); its path
+    there, or None without a lab."""
+    if truth_file is None or not truth_file.exists():
+        return None
+    truth = log_dir / "truth.npz"
+    shutil.copyfile(truth_file, truth)
+    return truth
 
-    truth: Path | None = None
-    if truth_file is not None and truth_file.exists():
-        truth = Path(log_dir) / "truth.npz"
-        shutil.copyfile(truth_file, truth)
+
+def _after(step: AfterFlight, log_dir: Path, truth: Path | None, echo: Echo) -> None:
+    """Run one after-flight step and print its lines; one that fails says so in a line
+    (the flight and its log are done: only the step's own output is lost)."""
     try:
-        try:
-            report = report_flight(log_dir, truth)
-        except GroundStationError as exc:  # matplotlib missing: the metrics still count
-            echo(f"no figure: {exc}")
-            report = report_flight(log_dir, truth, figures=False)
-    except GroundStationError as exc:
-        echo(f"no report: {exc}")
+        lines = step(log_dir, truth)
+    except Exception as exc:
+        echo(f"  {getattr(step, '__name__', 'after-flight step')}: failed: {exc}")
         return
-    echo(f"  report, judged from {report.record.truth_source}: {report.report_md}")
-    if report.figure is not None:
-        echo(f"  figure of the flown path against the reference: {report.figure}")
+    for line in lines:
+        echo(line)

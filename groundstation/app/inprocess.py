@@ -21,17 +21,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from groundstation.app.recorder import FlightRecorder
+from groundstation.app.ticklog import TickLogger
 from groundstation.asctec.decoder import StreamDecoder, encode_frame
 from groundstation.asctec.messages import ConfigMsg, DataMsg
 from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
+from groundstation.flight.core import FlightCore, TickResult
+from groundstation.flight.inputs import DataFrontEnd, with_vicon
+from groundstation.flight.supervisor import State, Transition
 from groundstation.lab import Lab, virtual_lab
-from groundstation.loop.core import FlightCore, TickResult
-from groundstation.loop.inputs import DataFrontEnd, with_vicon
-from groundstation.loop.recorder import FlightRecorder
-from groundstation.loop.supervisor import State, Transition
-from groundstation.loop.ticklog import TickLogger
 from groundstation.types import FloatArray, Pose
 from groundstation.vicon.posefilter import PoseFilter
 

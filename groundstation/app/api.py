@@ -3,7 +3,7 @@ may ask of a flying daemon, and how each is checked and answered.
 
 Requests are JSON objects on the control socket (:mod:`groundstation.telemetry.control`);
 each reply is ``{"ok": true, ...}`` or ``{"ok": false, "error": why, "kind": kind}``, every
-refusal with one of the kinds of :class:`~groundstation.loop.commander.CommandRefusedError`:
+refusal with one of the kinds of :class:`~groundstation.flight.commander.CommandRefusedError`:
 ``request``, ``state``, ``volume``, ``infeasible``, ``busy``, ``internal``. Frames as
 everywhere: NED earth [m], headings [rad] from north, times [s].
 
@@ -28,15 +28,15 @@ a flight with a configured trajectory answers status, land and channels and refu
 motions. Motions are accepted only in TRACK: before take-off is complete, while a
 failsafe acts and after landing began they are refused with kind ``state``.
 
-Every number is checked at the boundary (:mod:`groundstation.loop.boundary`) before any
-arithmetic; every motion lasts at most :data:`~groundstation.loop.commander.MAX_MOTION_S`
+Every number is checked at the boundary (:mod:`groundstation.flight.boundary`) before any
+arithmetic; every motion lasts at most :data:`~groundstation.flight.commander.MAX_MOTION_S`
 however its length arises, checked before it is sampled.
 
 Threads: :meth:`MotionApi.handle` runs where the request arrived (the control socket's
 thread in the daemon). Everything that reads or changes the flight goes through
 ``in_loop``, which runs a function in the flight loop between two ticks and returns its
 result. Planning, the expensive part, goes to the ``planner``: in the daemon a process of
-its own (:mod:`groundstation.loop.planner_process`), which must answer within
+its own (:mod:`groundstation.app.planner_process`), which must answer within
 ``api.plan_timeout_s``; the loop never waits for it.
 """
 
@@ -55,8 +55,8 @@ import structlog
 
 from groundstation.config import GroundStationConfig
 from groundstation.control.base import heading_of
-from groundstation.loop import boundary
-from groundstation.loop.commander import (
+from groundstation.flight import boundary
+from groundstation.flight.commander import (
     PLAN_LEAD_S,
     Commander,
     CommandRefusedError,
@@ -64,8 +64,8 @@ from groundstation.loop.commander import (
     PlanBase,
     Planned,
 )
-from groundstation.loop.core import FlightCore
-from groundstation.loop.planner import (
+from groundstation.flight.core import FlightCore
+from groundstation.flight.planner import (
     Follow,
     Followable,
     GoTo,
@@ -78,7 +78,7 @@ from groundstation.loop.planner import (
     plan_with,
     settings_from_config,
 )
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from groundstation.model.quaternion import rotate
 from groundstation.types import CHANNELS
 
@@ -178,7 +178,7 @@ class MotionApi:
     in_loop : runs a function in the flight loop and returns its result (the daemon's
         queue to its loop; by default in the caller's thread, for a core nobody else steps)
     planner : plans motions (the daemon's planner process; by default in the caller's
-        thread, :class:`~groundstation.loop.planner.InlinePlanner`)
+        thread, :class:`~groundstation.flight.planner.InlinePlanner`)
     health : the daemon's input health for status replies (a JSON-able mapping)
     clock, wall_clock : monotonic and unix time [s]
     """

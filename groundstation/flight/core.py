@@ -1,8 +1,8 @@
 """The flight core: one tick in, one COMMAND out. No threads, sockets or clocks.
 
 The same :class:`FlightCore` runs inside the real-time daemon
-(:mod:`groundstation.loop.daemon`) and in-process against the virtual lab's
-simulated clock (:mod:`groundstation.loop.inprocess`), so what is tested fast
+(:mod:`groundstation.app.daemon`) and in-process against the virtual lab's
+simulated clock (:mod:`groundstation.app.inprocess`), so what is tested fast
 is what flies.
 
 Per tick (one DATA sample, 100 Hz):
@@ -46,15 +46,15 @@ from groundstation.control.trajectory import Trajectory
 from groundstation.estimation.base import Estimator
 from groundstation.estimation.ekf import Ekf
 from groundstation.estimation.records import EkfParams, InitReport
-from groundstation.loop.assemble import (
+from groundstation.flight.assembly import (
     controller_from_config,
     flight_limits_from_config,
     trajectory_for_flight,
 )
-from groundstation.loop.commander import Commander
-from groundstation.loop.inputs import InputHealth, VehicleStatus, quadrotor_params
-from groundstation.loop.mission import Mission
-from groundstation.loop.supervisor import Observation, State, Supervisor, SupervisorLimits
+from groundstation.flight.commander import Commander
+from groundstation.flight.inputs import InputHealth, VehicleStatus, quadrotor_params
+from groundstation.flight.mission import Mission
+from groundstation.flight.supervisor import Observation, State, Supervisor, SupervisorLimits
 from groundstation.model import inputs_from_sticks
 from groundstation.types import (
     Channel,
@@ -138,7 +138,7 @@ class FlightCore:
     controller, trajectory, estimator : replace the ones the configuration names
         (tests and the evaluation inject their own)
     duration_s : trajectory time flown before landing (default: see
-        :func:`~groundstation.loop.assemble.trajectory_for_flight`, which also shapes
+        :func:`~groundstation.flight.assembly.trajectory_for_flight`, which also shapes
         and checks the trajectory: TrajectoryError if it cannot be flown)
     """
 

@@ -1,9 +1,9 @@
 """The daemon's planner: a process of its own that plans run-time motions with a deadline.
 
 A motion is planned where it cannot touch the flight loop (see
-:mod:`groundstation.loop.planner` for why a thread is not enough): the control socket's
-thread sends the planner a picklable job (:class:`~groundstation.loop.planner.PlanJob`:
-the request's numbers, and for a motion the :class:`~groundstation.loop.commander.
+:mod:`groundstation.flight.planner` for why a thread is not enough): the control socket's
+thread sends the planner a picklable job (:class:`~groundstation.flight.planner.PlanJob`:
+the request's numbers, and for a motion the :class:`~groundstation.flight.commander.
 PlanBase` the loop handed out) over a socket pair and waits for the pickled result, at
 most until the request's deadline (``api.plan_timeout_s``). A job not done by then is
 refused (``infeasible``, with the reason) and the process is killed and started again;
@@ -24,7 +24,7 @@ three things the flight needs and ``multiprocessing`` does not give:
 
 Wire protocol (``multiprocessing.connection`` framing, pickles, parent to child): the
 parent's ``sys.path`` (so jobs defined outside the package unpickle), the
-:class:`~groundstation.loop.planner.PlannerSettings`, then ``(seq, job)`` per job; the
+:class:`~groundstation.flight.planner.PlannerSettings`, then ``(seq, job)`` per job; the
 child answers ``("ready", pid)`` once it has imported, then ``(seq, "ok", result)``,
 ``(seq, "refused", kind, reason)`` or ``(seq, "error", text)`` per job. The child ends
 when its end of the socket closes.
@@ -46,8 +46,8 @@ from typing import Any
 
 import structlog
 
-from groundstation.loop.commander import CommandRefusedError
-from groundstation.loop.planner import PlanJob, PlannerSettings
+from groundstation.flight.commander import CommandRefusedError
+from groundstation.flight.planner import PlanJob, PlannerSettings
 
 log = structlog.get_logger(__name__)
 
@@ -66,7 +66,7 @@ STOP_WAIT_S = 1.0
 [s]; it ends at once when its socket closes unless it is planning."""
 
 _BOOT = ("import os, sys; os.nice({nice}); "
-         "from groundstation.loop.planner_process import serve; serve(int(sys.argv[1]))")
+         "from groundstation.app.planner_process import serve; serve(int(sys.argv[1]))")
 """The child's command line: lower its priority before any import, then serve."""
 
 

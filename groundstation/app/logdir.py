@@ -22,8 +22,8 @@ from typing import Any
 
 import structlog
 
+from groundstation.app.recorder import FlightRecorder
 from groundstation.errors import RecorderError
-from groundstation.loop.recorder import FlightRecorder
 
 __all__ = ["create_flight_log", "fallback_log_dirs"]
 

@@ -49,7 +49,7 @@ from groundstation.control.minjerk import (
     smoothstep_integral,
 )
 from groundstation.control.trajectory import Trajectory
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from groundstation.types import FloatArray, Reference
 
 

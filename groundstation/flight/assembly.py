@@ -32,8 +32,8 @@ from groundstation.control.shaping import describe, shape_for_flight
 from groundstation.control.trajectories import trajectory_from_config
 from groundstation.control.trajectory import PiecewiseLinear, Trajectory
 from groundstation.errors import ConfigError, TrajectoryError
-from groundstation.loop.commander import DEFAULT_MOVE_ACCEL_M_S2, Commander, MotionLimits
-from groundstation.loop.inputs import quadrotor_params
+from groundstation.flight.commander import DEFAULT_MOVE_ACCEL_M_S2, Commander, MotionLimits
+from groundstation.flight.inputs import quadrotor_params
 
 _log = structlog.get_logger(__name__)
 
@@ -120,7 +120,7 @@ def volume_from_config(config: GroundStationConfig) -> Volume:
 
 
 def motion_limits_from_config(config: GroundStationConfig) -> MotionLimits:
-    """How run-time motions are sized and checked (:mod:`groundstation.loop.commander`):
+    """How run-time motions are sized and checked (:mod:`groundstation.flight.commander`):
     the trajectory's limits and volume, ``api.speed_m_s``."""
     return MotionLimits(flight_limits_from_config(config), volume_from_config(config),
                         speed=config.api.speed_m_s, accel=DEFAULT_MOVE_ACCEL_M_S2)

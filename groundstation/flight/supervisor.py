@@ -183,7 +183,7 @@ class Observation:
         estimate, which drifts when a landing is flown without Vicon.
     battery_v : battery voltage the X-3D reports [V] (NaN: no STATUS block)
     land_request : why to land now ("" for no): a client asked, or the commanded flight
-        was idle too long (:mod:`groundstation.loop.commander`); a nominal landing
+        was idle too long (:mod:`groundstation.flight.commander`); a nominal landing
     vicon_position : NED [m] of the newest pose the pose filter passed, if it is at most
         ``vicon_loss_hold_s`` old (None otherwise): the truth the geofence checks besides
         the estimate, which may be wrong

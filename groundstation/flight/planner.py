@@ -1,6 +1,6 @@
 """What a run-time motion is planned from, and the jobs that plan it off the flight loop.
 
-Planning a motion (:mod:`groundstation.loop.commander`) builds, shapes and checks a
+Planning a motion (:mod:`groundstation.flight.commander`) builds, shapes and checks a
 trajectory, allocating up to hundreds of thousands of short-lived objects. In the
 daemon that work runs in a process of its own (:class:`~groundstation.loop.
 planner_process.PlannerProcess`): a thread of the daemon's interpreter would share the
@@ -12,16 +12,16 @@ up to 38 ms and the vehicle's watchdog expire). This module holds what both side
   volume, the shaping), built once from the configuration;
 * the jobs, small picklable records a planner runs: :class:`PrepareFollow` (build, bound,
   shape and check a trajectory to follow; the expensive part, before the loop is asked
-  for a :class:`~groundstation.loop.commander.PlanBase`) and :class:`PlanMotion` (plan
+  for a :class:`~groundstation.flight.commander.PlanBase`) and :class:`PlanMotion` (plan
   one motion from a base: a :class:`GoTo`, :class:`TakeOff`, :class:`Hold` or
   :class:`Follow`);
 * :class:`InlinePlanner`, which runs them in the caller's thread: for a flight core
   nobody else steps (the in-process runner on its simulated clock, tests). Its work is
   bounded by the same checks before it starts (a motion of at most
-  :data:`~groundstation.loop.commander.MAX_MOTION_S`), not by a deadline.
+  :data:`~groundstation.flight.commander.MAX_MOTION_S`), not by a deadline.
 
 Every job bounds its work before doing it: durations, laps, ramps and the motion's
-length are compared with :data:`~groundstation.loop.commander.MAX_MOTION_S` before
+length are compared with :data:`~groundstation.flight.commander.MAX_MOTION_S` before
 anything is sampled, so no request can make a planner sample more than that span.
 """
 
@@ -38,8 +38,8 @@ from groundstation.control.shaping import shape_for_flight
 from groundstation.control.trajectories import trajectory_from_config, waypoints_from_rows
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import TrajectoryError
-from groundstation.loop.assemble import motion_limits_from_config
-from groundstation.loop.commander import (
+from groundstation.flight.assembly import motion_limits_from_config
+from groundstation.flight.commander import (
     MAX_MOTION_S,
     CommandRefusedError,
     Motion,
@@ -191,7 +191,7 @@ class GoTo:
     duration: float | None
 
     def plan(self, base: PlanBase, limits: MotionLimits) -> Planned:
-        """See :func:`~groundstation.loop.commander.plan_go_to`."""
+        """See :func:`~groundstation.flight.commander.plan_go_to`."""
         return plan_go_to(base, self.target, self.yaw, self.duration, limits)
 
 
@@ -213,7 +213,7 @@ class Hold:
     """Stop as soon as the limits allow."""
 
     def plan(self, base: PlanBase, limits: MotionLimits) -> Planned:
-        """See :func:`~groundstation.loop.commander.plan_hold`."""
+        """See :func:`~groundstation.flight.commander.plan_hold`."""
         return plan_hold(base, limits)
 
 
@@ -225,7 +225,7 @@ class Follow:
     start: float | None
 
     def plan(self, base: PlanBase, limits: MotionLimits) -> Planned:
-        """See :func:`~groundstation.loop.commander.plan_follow`."""
+        """See :func:`~groundstation.flight.commander.plan_follow`."""
         f = self.followable
         return plan_follow(base, f.trajectory, f.duration, limits, self.start)
 

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import math
 
+from groundstation.app.recorder import FlightRecorder
 from groundstation.asctec.blocks import RcBlock, StatusBlock
 from groundstation.asctec.messages import DataMsg
-from groundstation.loop.core import TickResult
-from groundstation.loop.recorder import FlightRecorder
+from groundstation.flight.core import TickResult
 from groundstation.types import ImuSample, Pose
 
 

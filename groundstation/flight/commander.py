@@ -14,7 +14,7 @@ Planning and flying are split so that the flight loop never waits for a client:
   mission's trajectory clock (which HOLD pauses) and keeps the motions' book:
   started, arrived, pre-empted, how long the vehicle has been idle.
 * The ``plan_*`` functions are pure and run off the loop, in the planner process
-  (:mod:`groundstation.loop.planner`). They start from a :class:`PlanBase`, the plan in
+  (:mod:`groundstation.flight.planner`). They start from a :class:`PlanBase`, the plan in
   force and the
   trajectory time at which the new motion will begin (:data:`PLAN_LEAD_S` ahead of
   the loop), so the motion continues the reference exactly: position, velocity,
@@ -35,7 +35,7 @@ starts, and the last one is at rest. Motions:
 
 Positions are NED [m], headings [rad]. The plan's headings are on the mission's
 scale (the mission adds its heading offset, see
-:attr:`~groundstation.loop.mission.Mission.heading_offset`); a requested heading is
+:attr:`~groundstation.flight.mission.Mission.heading_offset`); a requested heading is
 absolute and is converted with the offset in the :class:`PlanBase`.
 """
 
@@ -53,7 +53,7 @@ from groundstation.control.feasibility import FlightLimits, Volume, check_feasib
 from groundstation.control.minjerk import min_jerk_duration
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import GroundStationError, TrajectoryError
-from groundstation.loop.mission import wrap_angle
+from groundstation.flight.mission import wrap_angle
 from groundstation.types import FloatArray, Reference
 
 PLAN_LEAD_S = 0.05
