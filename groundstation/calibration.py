@@ -34,7 +34,7 @@ from groundstation.config import GroundStationConfig
 from groundstation.errors import GroundStationError
 from groundstation.flight.inputs import imu_scaling
 from groundstation.types import FloatArray
-from groundstation.vicon.client import ViconClient
+from groundstation.vicon.receiver import ViconReceiver
 
 MOVING_POSITION_M = 0.005
 """At rest, the mean Vicon position of a fifth of the measurement stays this close to the
@@ -223,7 +223,7 @@ def _vec(values: tuple[float, ...], fmt: str) -> str:
     return " ".join(fmt.format(v) for v in values)
 
 
-def _collect_poses(client: ViconClient, seconds: float) -> list[Any]:
+def _collect_poses(client: ViconReceiver, seconds: float) -> list[Any]:
     poses = []
     end = time.monotonic() + seconds
     while (left := end - time.monotonic()) > 0:
@@ -314,7 +314,7 @@ def calibrate_imu(config: GroundStationConfig, seconds: float = 10.0,
     scaling = imu_scaling(config)
     g = config.vehicle.gravity
     with open_link(config.serial) as link:
-        vicon = ViconClient.from_config(config.vicon, config.safety).start() if use_vicon \
+        vicon = ViconReceiver.from_config(config.vicon, config.safety).start() if use_vicon \
             else None
         try:
             link.start_stream()
@@ -370,7 +370,7 @@ def _t3(v: FloatArray) -> tuple[float, float, float]:
 def calibrate_vicon(config: GroundStationConfig, seconds: float = 10.0) -> ViconCalibration:
     """Measure Vicon's noise and stream with the object at rest, and check the frames
     (see the module docstring). CalibrationError without poses or if the object moves."""
-    with ViconClient.from_config(config.vicon, config.safety).start() as client:
+    with ViconReceiver.from_config(config.vicon, config.safety).start() as client:
         poses = _collect_poses(client, seconds)
     if len(poses) < 20:
         raise CalibrationError(f"only {len(poses)} Vicon poses of {config.vicon.object_name!r} in "

@@ -538,8 +538,8 @@ def channels(
     controller. A daemon that authenticates its clients (CURVE) needs `--server-key`
     and `--client-key`.
     """
-    from groundstation.telemetry.control import send_request
     from groundstation.telemetry.curve import CurveClient, load_client_keys
+    from groundstation.telemetry.requests import send_request
 
     control_endpoint = aliased(control, endpoint, "--control", "--endpoint", DEFAULT_CONTROL)
     if not (math.isfinite(timeout) and timeout > 0):

@@ -6,7 +6,7 @@ from north. Exit codes: 0 done; 1 refused (the daemon's reason on stderr), no da
 answering, a wait that timed out or ended by a failsafe; 2 a usage error.
 
 Options as everywhere in ``gs`` (:mod:`groundstation.cli_options`): ``--control`` the
-daemon's control socket (formerly ``--endpoint``), ``--telemetry`` its publisher,
+daemon's request socket (formerly ``--endpoint``), ``--telemetry`` its publisher,
 ``--timeout`` the reply's wait (3 s), ``--wait-timeout`` how long ``--wait`` waits.
 """
 

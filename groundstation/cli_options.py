@@ -5,7 +5,7 @@ One option name means one thing across the whole command set:
 ==================  ==========================================================================
 ``--config/-c F``   the configuration a command reads (``gs check-config F`` keeps the
                     positional form)
-``--control E``     the daemon's control socket, ``telemetry.control_endpoint``
+``--control E``     the daemon's request socket, ``telemetry.control_endpoint``
                     (goto, hold, land, status, channels); formerly ``--endpoint``
 ``--telemetry E``   the daemon's telemetry publisher, ``telemetry.endpoint`` (monitor,
                     foxglove, ``land --wait``); formerly ``--endpoint`` on monitor and foxglove
@@ -38,7 +38,7 @@ T = TypeVar("T")
 
 REPLY_TIMEOUT_S = 3.0
 """``--timeout``: how long a request waits for the daemon's reply [s] (every command that
-talks to the control socket)."""
+talks to the request socket)."""
 WAIT_TIMEOUT_S = 60.0
 """``--wait-timeout``: how long ``gs land --wait`` waits, and ``gs goto --wait`` beyond the
 move's planned duration [s]."""

@@ -1098,9 +1098,9 @@ class SafetyConfig(ConfigModel):
 
 # --------------------------------------------------------------------------- telemetry, logging
 class TelemetryConfig(ConfigModel):
-    """The pyzmq PUB socket, and the control socket ``gs channels`` talks to.
+    """The pyzmq PUB socket, and the request socket ``gs channels`` talks to.
 
-    The control socket changes what flies, so it binds to loopback unless it
+    The request socket changes what flies, so it binds to loopback unless it
     authenticates its clients with CURVE (:mod:`groundstation.telemetry.curve`):
     ``control_server_key`` and ``control_client_keys`` together turn CURVE on, and an
     endpoint beyond loopback is refused without them.
@@ -1465,7 +1465,7 @@ def key_lines(path: str | Path) -> dict[str, int]:
 def check_files(config: GroundStationConfig, source: str = "<config>",
                 lines: dict[str, int] | None = None) -> None:
     """Check that the files the configuration names exist and can be used, as the flight
-    will open them: the waypoint CSV, the H-infinity gain, the control socket's CURVE
+    will open them: the waypoint CSV, the H-infinity gain, the request socket's CURVE
     keys. Raises ConfigError naming every field whose file cannot be used (and its line in
     the file: ``lines`` as :func:`key_lines` gives them).
 

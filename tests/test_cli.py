@@ -1,4 +1,4 @@
-"""The `gs` commands that wrap the evaluation, export, replay and the control socket, end to
+"""The `gs` commands that wrap the evaluation, export, replay and the request socket, end to
 end through typer."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 from typer.testing import CliRunner
 
 from groundstation.cli import app
-from groundstation.telemetry.control import ControlServer
+from groundstation.telemetry.requests import RequestServer
 
 REPO = Path(__file__).resolve().parents[1]
 runner = CliRunner()
@@ -74,7 +74,7 @@ def test_channels_talks_to_the_control_socket() -> None:
             return {"ok": False, "error": "yaw alone is not allowed now"}
         return {"ok": True, "auto": ["thrust"], "state": "TRACK"}
 
-    with ControlServer("tcp://127.0.0.1:*") as server:
+    with RequestServer("tcp://127.0.0.1:*") as server:
         assert server.endpoint is not None
         stop = threading.Event()
 
@@ -111,7 +111,7 @@ def test_channels_with_curve_keys(tmp_path: Path) -> None:
     alice = str(tmp_path / "clients" / "alice.key_secret")
     curve = load_server_keys(tmp_path / "server.key_secret", tmp_path / "clients")
     reply = {"ok": True, "auto": ["thrust"], "state": "TRACK"}
-    with ControlServer("tcp://127.0.0.1:*", curve=curve) as control:
+    with RequestServer("tcp://127.0.0.1:*", curve=curve) as control:
         assert control.endpoint is not None
         stop = threading.Event()
 

@@ -6,7 +6,7 @@ Reads of configuration fields are recorded (``ConfigModel.__getattribute__`` wra
 the ground station does what a configuration drives: the flight core for every controller
 type, a short real-time flight of the daemon against the virtual lab over a pty and UDP
 (serial link, Vicon, telemetry, flight log, real-time settings), ``gs synth hinf`` (the
-H-infinity design keys), the control socket with CURVE keys, the virtual lab's parameters
+H-infinity design keys), the request socket with CURVE keys, the virtual lab's parameters
 (the vehicle it simulates), and in the AscTec LL dialect the flight core, the lab and
 ``gs motors start`` over its link (the ``serial.ll`` keys). The
 configurations are built before recording starts, so a key that only a validator looks at
@@ -40,7 +40,7 @@ from groundstation.config import (
     load_config,
 )
 from groundstation.flight.core import FlightCore
-from groundstation.telemetry.control import ControlServer
+from groundstation.telemetry.requests import RequestServer
 from sim_device.params import LabParams
 from sim_device.realtime import SimDeviceProcess
 
@@ -154,7 +154,7 @@ def test_every_configuration_key_is_read(tmp_path: Path) -> None:
         "gs synth hinf": lambda: CliRunner().invoke(
             app, ["synth", "hinf", "--config", str(hinf_file), "--out",
                   str(tmp_path / "g.npz")]),
-        "control socket with CURVE": lambda: ControlServer.from_config(curve.telemetry).close(),
+        "request socket with CURVE": lambda: RequestServer.from_config(curve.telemetry).close(),
         "real-time flight": lambda: _fly_briefly(base, tmp_path),
         "flight core (asctec-ll)": lambda: FlightCore(ll),
         "virtual lab parameters (asctec-ll)": lambda: LabParams.from_config(ll),

@@ -24,8 +24,8 @@ from groundstation.app.fly import fly_command
 from groundstation.app.recorder import read_flight
 from groundstation.config import apply_overrides, dump_config, load_config
 from groundstation.flight.supervisor import State
-from groundstation.telemetry.client import TelemetryClient
-from groundstation.telemetry.control import send_request
+from groundstation.telemetry.requests import send_request
+from groundstation.telemetry.subscriber import TelemetrySubscriber
 from sim_device.realtime import SimDeviceProcess
 
 REPO = Path(__file__).resolve().parents[1]
@@ -53,7 +53,7 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
         runner.start()
         assert daemon.ready.wait(10.0)
         assert daemon.telemetry_endpoint is not None
-        client = TelemetryClient(daemon.telemetry_endpoint)
+        client = TelemetrySubscriber(daemon.telemetry_endpoint)
         try:
             topics: dict[str, dict[str, object]] = {}
             for _ in range(400):  # bounded: telemetry arrives at 20 Hz
@@ -72,7 +72,7 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
             second = fly_command(cfg, echo=echoed.append)
             t_second_end = time.monotonic()
             time.sleep(0.2)  # the wire window below ends before the handover
-            # Then hand yaw to the pilot and back over the control socket (what
+            # Then hand yaw to the pilot and back over the request socket (what
             # `gs channels` does).
             assert daemon.control_endpoint is not None
             handed = send_request(daemon.control_endpoint,

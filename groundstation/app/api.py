@@ -1,7 +1,7 @@
 """The run-time API's requests: what a client (:mod:`groundstation.client`, ``gs goto``)
 may ask of a flying daemon, and how each is checked and answered.
 
-Requests are JSON objects on the control socket (:mod:`groundstation.telemetry.control`);
+Requests are JSON objects on the request socket (:mod:`groundstation.telemetry.requests`);
 each reply is ``{"ok": true, ...}`` or ``{"ok": false, "error": why, "kind": kind}``, every
 refusal with one of the kinds of :class:`~groundstation.flight.commander.CommandRefusedError`:
 ``request``, ``state``, ``volume``, ``infeasible``, ``busy``, ``internal``. Frames as
@@ -32,7 +32,7 @@ Every number is checked at the boundary (:mod:`groundstation.flight.boundary`) b
 arithmetic; every motion lasts at most :data:`~groundstation.flight.commander.MAX_MOTION_S`
 however its length arises, checked before it is sampled.
 
-Threads: :meth:`MotionApi.handle` runs where the request arrived (the control socket's
+Threads: :meth:`MotionApi.handle` runs where the request arrived (the request socket's
 thread in the daemon). Everything that reads or changes the flight goes through
 ``in_loop``, which runs a function in the flight loop between two ticks and returns its
 result. Planning, the expensive part, goes to the ``planner``: in the daemon a process of

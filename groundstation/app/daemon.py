@@ -95,11 +95,11 @@ from groundstation.flight.inputs import DataFrontEnd, VehicleStatus, with_vicon
 from groundstation.flight.planner import settings_from_config
 from groundstation.flight.supervisor import FailsafeEvent, Outcome, State, Transition
 from groundstation.logs import log_through_sink
-from groundstation.telemetry.control import ControlServer, Reply, Request
 from groundstation.telemetry.publisher import TelemetryPublisher
+from groundstation.telemetry.requests import Reply, Request, RequestServer
 from groundstation.telemetry.schema import health_payload, state_payload
 from groundstation.types import Pose
-from groundstation.vicon.client import ViconClient
+from groundstation.vicon.receiver import ViconReceiver
 
 log = structlog.get_logger(__name__)
 
@@ -133,8 +133,8 @@ class FlightSummary:
     max_command_gap_s : longest time between two COMMAND writes while armed [s]
     keepalive_resends : COMMANDs the keep-alive wrote because the loop had not
     collector : garbage collections during the loop and their longest pauses
-    control : the control socket's counters (:class:`~groundstation.telemetry.control.
-        ControlStats`: requests answered, malformed, refused...)
+    control : the request socket's counters (:class:`~groundstation.telemetry.requests.
+        RequestStats`: requests answered, malformed, refused...)
     link, protocol, baud : the serial link's counters at the end (bytes each way,
         rejections; in the AscTec LL dialect polls and acknowledgements), its dialect and
         line rate [baud]
@@ -233,7 +233,7 @@ class FlightDaemon:
         """The bound telemetry endpoint once :meth:`run` has started (``*`` ports resolved)."""
         self.control_endpoint: str | None = None
         """The bound control endpoint (``gs channels``) once :meth:`run` has started."""
-        self._control_stats: Callable[[], dict[str, int]] = dict  # the socket's, once open
+        self._request_stats: Callable[[], dict[str, int]] = dict  # the socket's, once open
         self._last: TickResult | None = None  # the last tick's result (final telemetry)
         self._inbox = LoopInbox()
         self._front_health: Callable[[], dict[str, object]] = dict
@@ -271,7 +271,7 @@ class FlightDaemon:
             stack.enter_context(fifo_priority(cfg.realtime.fifo_priority))
             link = open_link(cfg.serial)  # the configured dialect
             stack.callback(link.close)  # sends the final COMMAND with ctrl mask 0
-            vicon = ViconClient.from_config(cfg.vicon, cfg.safety).start()
+            vicon = ViconReceiver.from_config(cfg.vicon, cfg.safety).start()
             stack.callback(vicon.close)
             # the configured directory, else a user's (one line says so): logdir.py
             recorder = create_flight_log(cfg.logging.flight_log_dir, dump_config(cfg),
@@ -281,14 +281,14 @@ class FlightDaemon:
             telemetry = TelemetryPublisher.from_config(cfg.telemetry)
             stack.callback(telemetry.close)
             self.telemetry_endpoint = telemetry.endpoint
-            control = ControlServer.from_config(cfg.telemetry)
-            stack.callback(control.close)
-            self.control_endpoint = control.endpoint
-            self._control_stats = control.stats
-            if control.endpoint is not None:  # stopped before the socket closes
+            server = RequestServer.from_config(cfg.telemetry)
+            stack.callback(server.close)
+            self.control_endpoint = server.endpoint
+            self._request_stats = server.stats
+            if server.endpoint is not None:  # stopped before the socket closes
                 if self.core.commander is not None:  # motions planned in a process of its own
                     stack.enter_context(self._planner)
-                stack.enter_context(self._serving(control))
+                stack.enter_context(self._serving(server))
             stack.enter_context(on_stop_signals(self._on_signal))
             stack.enter_context(cpu_latency_request(cfg.realtime.cpu_dma_latency_us))
             stack.enter_context(switch_interval(cfg.realtime.switch_interval_ms / 1000.0))
@@ -416,24 +416,24 @@ class FlightDaemon:
 
     def handle_request(self, request: Request) -> Reply:
         """Answer one run-time request (:mod:`groundstation.app.api`): status, motions,
-        land, channels. Runs in the control socket's thread; what touches the flight runs
+        land, channels. Runs in the request socket's thread; what touches the flight runs
         in the loop between two ticks."""
         return self._api.handle(request)
 
     @contextmanager
-    def _serving(self, control: ControlServer) -> Iterator[None]:
-        """Answer the control socket in a thread of its own while the block runs."""
+    def _serving(self, server: RequestServer) -> Iterator[None]:
+        """Answer the request socket in a thread of its own while the block runs."""
         stop = threading.Event()
-        server = threading.Thread(target=control.serve, args=(self.handle_request, stop),
-                                  name="gs-control", daemon=True)
-        server.start()
+        thread = threading.Thread(target=server.serve, args=(self.handle_request, stop),
+                                  name="gs-requests", daemon=True)
+        thread.start()
         try:
             yield
         finally:
             stop.set()
-            server.join(5.0)
+            thread.join(5.0)
 
-    def _health_section(self, link: VehicleLink, vicon: ViconClient) -> dict[str, object]:
+    def _health_section(self, link: VehicleLink, vicon: ViconReceiver) -> dict[str, object]:
         """Input health for a status reply: DATA and Vicon rates [Hz] and ages [s], and the
         battery [V]."""
         now = time.monotonic()
@@ -445,7 +445,7 @@ class FlightDaemon:
                 "pilot_enabled": status.pilot_enabled}
 
     def _publish_end(self, telemetry: TelemetryPublisher, link: VehicleLink,
-                     vicon: ViconClient) -> None:
+                     vicon: ViconReceiver) -> None:
         """Publish the flight's last ``state`` (``final``, with its terminal state, outcome
         and reason) and ``health``, and give subscribers up to :data:`FINAL_LINGER_S` to
         receive them before the publisher closes."""
@@ -463,7 +463,7 @@ class FlightDaemon:
             telemetry.publish(topic, body, t)
         telemetry.close(linger_s=FINAL_LINGER_S)
 
-    def _snapshot(self, result: TickResult, link: VehicleLink, vicon: ViconClient,
+    def _snapshot(self, result: TickResult, link: VehicleLink, vicon: ViconReceiver,
                   final: tuple[str, str] | None = None) -> dict[str, dict[str, object]]:
         status = self._front.status
         sticks = result.sticks if result.sticks is not None else status.pilot
@@ -481,7 +481,7 @@ class FlightDaemon:
                 vicon=vicon.health(), estimator=self.core.ekf.health()
                 if self.core.init_report is not None else None,
                 loop={"ticks": self._stats.ticks, "commands": self._stats.sent},
-                control=self._control_stats()),
+                control=self._request_stats()),
         }
 
     def _report_progress(self, line: str) -> None:
@@ -518,7 +518,7 @@ class FlightDaemon:
             reason=sup.transitions[-1].reason if sup.transitions else "",
             events=list(sup.events), max_command_gap_s=s.max_command_gap,
             keepalive_resends=s.keepalive_resends, collector=s.collector,
-            control=self._control_stats(), link=s.link,
+            control=self._request_stats(), link=s.link,
             protocol=self.config.serial.protocol, baud=self.config.serial.baud,
             log=log_loss if log_loss is not None else LogLoss(),
         )
@@ -529,7 +529,7 @@ class _Io:
     """What the loop talks to, opened by :meth:`FlightDaemon.run`."""
 
     link: VehicleLink
-    vicon: ViconClient
+    vicon: ViconReceiver
     recorder: FlightRecorder
     telemetry: TelemetryPublisher
     notifier: SdNotifier
@@ -614,7 +614,7 @@ def link_figures(summary: FlightSummary) -> LinkFigures | None:
         sum(stats.rejections.values()), stats.unexpected_data, **ll)  # type: ignore[arg-type]
 
 
-def _drain(vicon: ViconClient) -> list[Pose]:
+def _drain(vicon: ViconReceiver) -> list[Pose]:
     """Every pose the Vicon reader queued since the last tick (never blocks)."""
     poses = []
     while (pose := vicon.get(0.0)) is not None:

@@ -1,7 +1,7 @@
 """The daemon's planner: a process of its own that plans run-time motions with a deadline.
 
 A motion is planned where it cannot touch the flight loop (see
-:mod:`groundstation.flight.planner` for why a thread is not enough): the control socket's
+:mod:`groundstation.flight.planner` for why a thread is not enough): the request socket's
 thread sends the planner a picklable job (:class:`~groundstation.flight.planner.PlanJob`:
 the request's numbers, and for a motion the :class:`~groundstation.flight.commander.
 PlanBase` the loop handed out) over a socket pair and waits for the pickled result, at
@@ -73,7 +73,7 @@ _BOOT = ("import os, sys; os.nice({nice}); "
 class PlannerProcess:
     """Runs planning jobs in a child process, each by a deadline. Use ``with`` (or
     :meth:`start` and :meth:`close`); :meth:`run` is called from one thread at a time
-    (the control socket's), never from the flight loop.
+    (the request socket's), never from the flight loop.
 
     settings : what the jobs plan with; timeout_s : the configured planning budget of a
     request [s] (``api.plan_timeout_s``), named in refusals; nice : the child's nice

@@ -1,7 +1,7 @@
 """Numbers at the boundary of the run-time API: every field of a request checked before any
 arithmetic is done with it.
 
-A request arrives as JSON (:mod:`groundstation.telemetry.control`), where a number may be
+A request arrives as JSON (:mod:`groundstation.telemetry.requests`), where a number may be
 an integer of thousands of digits, ``NaN``, ``Infinity`` or ``1e308``. Each field is
 refused here with ``kind: request`` and a reason unless it is a JSON number a float
 holds exactly enough (an integer within +-2^53, a finite float) and within its physical

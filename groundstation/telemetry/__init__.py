@@ -2,7 +2,6 @@
 the ``gs monitor`` live view. The message schema is documented in
 :mod:`groundstation.telemetry.schema`."""
 
-from groundstation.telemetry.client import TelemetryClient
 from groundstation.telemetry.monitor import render, run_monitor
 from groundstation.telemetry.publisher import TelemetryPublisher
 from groundstation.telemetry.schema import (
@@ -12,13 +11,14 @@ from groundstation.telemetry.schema import (
     health_payload,
     state_payload,
 )
+from groundstation.telemetry.subscriber import TelemetrySubscriber
 
 __all__ = [
     "SCHEMA_VERSION",
     "TOPIC_HEALTH",
     "TOPIC_STATE",
-    "TelemetryClient",
     "TelemetryPublisher",
+    "TelemetrySubscriber",
     "health_payload",
     "render",
     "run_monitor",

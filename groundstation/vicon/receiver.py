@@ -1,12 +1,12 @@
-"""UDP client for the Vicon object stream: a thin I/O shell around :class:`PoseFilter`.
+"""The Vicon object stream's UDP receiver: a thin I/O shell around :class:`PoseFilter`.
 
 A reader thread receives datagrams on a UDP socket bound to the configured
 address and port, stamps each one with the monotonic receive time and feeds it to
 a :class:`PoseFilter` (decoding, frame bookkeeping, lost-tracking and outlier
 rejection, conversion to NED: see :mod:`.posefilter` and :mod:`.frames`). Poses
-come out through :meth:`ViconClient.get` (next pose, blocking) or
-:meth:`ViconClient.latest` (newest pose, non-blocking); :meth:`ViconClient.evidence`
-(rival streams, sightings outside the volume) and :meth:`ViconClient.diagnosis`
+come out through :meth:`ViconReceiver.get` (next pose, blocking) or
+:meth:`ViconReceiver.latest` (newest pose, non-blocking); :meth:`ViconReceiver.evidence`
+(rival streams, sightings outside the volume) and :meth:`ViconReceiver.diagnosis`
 read the filter under the same lock.
 
 Socket errors become :class:`groundstation.errors.ViconError` (``raise ... from``).
@@ -41,7 +41,7 @@ DEFAULT_PORT = 51001
 MAX_DATAGRAM = 65536
 
 
-class ViconClient:
+class ViconReceiver:
     """Receive one object's pose from Vicon Tracker over UDP.
 
     bind_address : local address to bind ("0.0.0.0" for all interfaces)
@@ -107,7 +107,7 @@ class ViconClient:
         *,
         clock: Callable[[], float] = time.monotonic,
         logger: structlog.typing.FilteringBoundLogger | None = None,
-    ) -> ViconClient:
+    ) -> ViconReceiver:
         """Build (not start) a client from the ``vicon:`` configuration section, with the
         flight volume of the ``safety:`` section (poses outside it are never passed on)."""
         return cls(
@@ -124,13 +124,13 @@ class ViconClient:
 
     # -- lifecycle -------------------------------------------------------------
 
-    def start(self) -> ViconClient:
+    def start(self) -> ViconReceiver:
         """Bind the socket and start the reader thread (no-op if already started).
 
         Raises ViconError if the socket cannot be created or bound, or if closed.
         """
         if self._closed:
-            raise ViconError("ViconClient is closed")
+            raise ViconError("ViconReceiver is closed")
         if self._thread is not None:
             return self
         try:
@@ -170,7 +170,7 @@ class ViconClient:
         with self._cond:
             self._cond.notify_all()
 
-    def __enter__(self) -> ViconClient:
+    def __enter__(self) -> ViconReceiver:
         return self.start()
 
     def __exit__(
@@ -187,14 +187,14 @@ class ViconClient:
     def address(self) -> tuple[str, int]:
         """The bound (host, port); raises ViconError before :meth:`start`."""
         if self._sock is None:
-            raise ViconError("ViconClient not started")
+            raise ViconError("ViconReceiver not started")
         host, port = self._sock.getsockname()[:2]
         return str(host), int(port)
 
     def fileno(self) -> int:
         """The socket's file descriptor (for select-based callers); -1 once closed."""
         if self._sock is None:
-            raise ViconError("ViconClient not started")
+            raise ViconError("ViconReceiver not started")
         return self._sock.fileno()
 
     def get(self, timeout: float | None = None) -> Pose | None:
@@ -253,7 +253,7 @@ class ViconClient:
     def _check(self) -> None:
         """Raise ViconError for use before start or a stored reader failure (lock held)."""
         if self._thread is None:
-            raise ViconError("ViconClient not started")
+            raise ViconError("ViconReceiver not started")
         if self._failure is not None:
             raise ViconError(f"Vicon reader failed: {self._failure}") from self._failure
 

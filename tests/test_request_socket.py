@@ -18,17 +18,17 @@ from groundstation.app.daemon import FlightDaemon
 from groundstation.config import validate_config
 from groundstation.endpoints import local_endpoint
 from groundstation.errors import TelemetryError
-from groundstation.telemetry.control import (
+from groundstation.telemetry.curve import CurveClient, load_client_keys, load_server_keys
+from groundstation.telemetry.requests import (
     FRAMES_PER_POLL,
     MAX_PARSED_BYTES,
     MAX_REQUEST_BYTES,
-    ControlServer,
+    RequestServer,
     send_request,
 )
-from groundstation.telemetry.curve import CurveClient, load_client_keys, load_server_keys
 
 
-def _serve_until(server: ControlServer, answered: int,
+def _serve_until(server: RequestServer, answered: int,
                  handler: Any = lambda r: {"ok": True, "echo": r}) -> threading.Thread:
     """Poll like the flight loop (every ms) until ``answered`` requests are answered."""
     def run() -> None:
@@ -41,7 +41,7 @@ def _serve_until(server: ControlServer, answered: int,
 
 
 def test_request_round_trip() -> None:
-    with ControlServer("tcp://127.0.0.1:*") as server:
+    with RequestServer("tcp://127.0.0.1:*") as server:
         assert server.endpoint is not None and not server.endpoint.endswith("*")
         thread = _serve_until(server, 1)
         reply = send_request(server.endpoint, {"request": "channels", "auto": ["thrust"]})
@@ -51,15 +51,15 @@ def test_request_round_trip() -> None:
 
 
 def test_poll_without_a_request_returns_at_once() -> None:
-    with ControlServer("tcp://127.0.0.1:*") as server:
+    with RequestServer("tcp://127.0.0.1:*") as server:
         assert server.poll(lambda r: pytest.fail("no request was sent")) is False
-    disabled = ControlServer(None)
+    disabled = RequestServer(None)
     assert disabled.endpoint is None and disabled.poll(lambda r: {}) is False
 
 
 @pytest.mark.parametrize("raw", [b"{not json", b"[1, 2]", b"\xff\xfe", b'"text"'])
 def test_malformed_requests_get_an_error_reply_and_are_counted(raw: bytes) -> None:
-    with ControlServer("tcp://127.0.0.1:*") as server:
+    with RequestServer("tcp://127.0.0.1:*") as server:
         assert server.endpoint is not None
         ctx = zmq.Context()
         req = ctx.socket(zmq.REQ)
@@ -83,7 +83,7 @@ def test_a_failing_handler_is_answered_not_raised() -> None:
     def broken(request: dict[str, Any]) -> dict[str, Any]:
         raise RuntimeError("bug")
 
-    with ControlServer("tcp://127.0.0.1:*") as server:
+    with RequestServer("tcp://127.0.0.1:*") as server:
         assert server.endpoint is not None
         thread = _serve_until(server, 1, broken)
         reply = send_request(server.endpoint, {"request": "channels"})
@@ -94,17 +94,17 @@ def test_a_failing_handler_is_answered_not_raised() -> None:
 
 
 def test_no_daemon_is_a_clear_timeout() -> None:
-    with ControlServer("tcp://127.0.0.1:*") as server:  # bound but never polled
+    with RequestServer("tcp://127.0.0.1:*") as server:  # bound but never polled
         assert server.endpoint is not None
         with pytest.raises(TelemetryError, match=r"no reply .* within 0\.2 s"):
             send_request(server.endpoint, {"request": "channels"}, timeout_s=0.2)
 
 
 def test_port_in_use_names_the_endpoint() -> None:
-    with ControlServer("tcp://127.0.0.1:*") as first:
+    with RequestServer("tcp://127.0.0.1:*") as first:
         assert first.endpoint is not None
         with pytest.raises(TelemetryError, match="cannot bind"):
-            ControlServer(first.endpoint)
+            RequestServer(first.endpoint)
 
 
 @pytest.mark.parametrize(("request_", "error"), [
@@ -140,9 +140,9 @@ ECHO: Any = lambda r: {"ok": True, "echo": r}  # noqa: E731  # the handler the t
 
 
 @contextmanager
-def _serving(server: ControlServer, handler: Any = ECHO) -> Iterator[None]:
+def _serving(server: RequestServer, handler: Any = ECHO) -> Iterator[None]:
     """Poll ``server`` like the flight loop (every ms) in a thread; any exception out of
-    :meth:`ControlServer.poll` fails the test."""
+    :meth:`RequestServer.poll` fails the test."""
     stop = threading.Event()
     errors: list[BaseException] = []
 
@@ -197,7 +197,7 @@ def _served(endpoint: str) -> bool:
 ])
 def test_bad_requests_get_an_error_reply_and_the_server_keeps_serving(
         frames: list[bytes], error: str) -> None:
-    with ControlServer("tcp://127.0.0.1:*") as server, _serving(server):
+    with RequestServer("tcp://127.0.0.1:*") as server, _serving(server):
         assert server.endpoint is not None
         reply = _raw(server.endpoint, frames)
         assert reply is not None and reply["ok"] is False and error in reply["error"], reply
@@ -217,7 +217,7 @@ def test_a_request_over_64_kib_never_reaches_the_handler() -> None:
         return {"ok": True}
 
     pad = {"request": "channels", "pad": ""}
-    with ControlServer("tcp://127.0.0.1:*") as server, _serving(server, handler):
+    with RequestServer("tcp://127.0.0.1:*") as server, _serving(server, handler):
         assert server.endpoint is not None
         big = json.dumps({**pad, "pad": "x" * MAX_REQUEST_BYTES}).encode()
         assert _raw(server.endpoint, [big], timeout_s=0.5) is None  # the peer is dropped
@@ -232,7 +232,7 @@ def test_a_request_over_64_kib_never_reaches_the_handler() -> None:
 
 def test_a_multipart_flood_is_drained_a_bounded_number_of_frames_per_poll() -> None:
     frames = [b'{"request": "channels"}'] + [b""] * (10 * FRAMES_PER_POLL)
-    with ControlServer("tcp://127.0.0.1:*") as server:
+    with RequestServer("tcp://127.0.0.1:*") as server:
         assert server.endpoint is not None
         ctx = zmq.Context()
         req = ctx.socket(zmq.REQ)
@@ -260,7 +260,7 @@ def test_a_multipart_flood_is_drained_a_bounded_number_of_frames_per_poll() -> N
 
 def test_a_reply_that_cannot_be_sent_reopens_the_socket(monkeypatch: pytest.MonkeyPatch
                                                         ) -> None:
-    with ControlServer("tcp://127.0.0.1:*") as server:
+    with RequestServer("tcp://127.0.0.1:*") as server:
         assert server.endpoint is not None and server._socket is not None
         broken = server._socket
 
@@ -290,7 +290,7 @@ def test_local_endpoints(endpoint: str, local: bool) -> None:
 @pytest.mark.parametrize("endpoint", ["tcp://0.0.0.0:*", "tcp://*:*"])
 def test_a_bind_beyond_loopback_without_keys_is_refused(endpoint: str) -> None:
     with pytest.raises(TelemetryError, match="beyond loopback without CURVE"):
-        ControlServer(endpoint)
+        RequestServer(endpoint)
 
 
 @pytest.fixture
@@ -312,7 +312,7 @@ def keys(tmp_path: Path) -> dict[str, Path]:
 @pytest.mark.slow
 def test_with_curve_only_an_authorised_client_is_served(keys: dict[str, Path]) -> None:
     curve = load_server_keys(keys["server_secret"], keys["clients"])
-    with ControlServer("tcp://127.0.0.1:*", curve=curve) as server, _serving(server):
+    with RequestServer("tcp://127.0.0.1:*", curve=curve) as server, _serving(server):
         assert server.endpoint is not None
         good = load_client_keys(keys["client_secret"], keys["server"])
         assert send_request(server.endpoint, {"request": "channels"}, curve=good)["ok"]
@@ -343,7 +343,7 @@ def test_the_daemon_handler_behind_a_real_socket_survives_hostile_clients() -> N
     """The loop's call, ``control.poll(daemon.handle_request)``, against garbage and then a
     real request: the garbage is answered and counted, the request takes effect."""
     daemon = FlightDaemon(validate_config({}))
-    with ControlServer("tcp://127.0.0.1:*") as server, \
+    with RequestServer("tcp://127.0.0.1:*") as server, \
             _serving(server, daemon.handle_request):
         assert server.endpoint is not None
         for frames in ([b"{}", b"{}"], [b"\xff"], [b"[" * 4000], [b'{"request": 7}'],

@@ -1,8 +1,8 @@
 """A telemetry subscriber: connects a SUB socket and returns decoded messages.
 
-``TelemetryClient("tcp://127.0.0.1:5556").receive(1.0)`` gives ``(topic, payload)``
+``TelemetrySubscriber("tcp://127.0.0.1:5556").receive(1.0)`` gives ``(topic, payload)``
 or None on timeout. Malformed messages are counted in
-:attr:`TelemetryClient.bad_messages` and skipped. ZeroMQ subscribers join late
+:attr:`TelemetrySubscriber.bad_messages` and skipped. ZeroMQ subscribers join late
 (the "slow joiner"): messages published before the connection is made are not
 seen, which is fine for a live view.
 """
@@ -21,7 +21,7 @@ from groundstation.telemetry._zmqowner import ZmqOwner
 from groundstation.telemetry.schema import decode
 
 
-class TelemetryClient(ZmqOwner):
+class TelemetrySubscriber(ZmqOwner):
     """Receives telemetry from a :class:`~groundstation.telemetry.publisher.TelemetryPublisher`.
 
     endpoint : the publisher's endpoint, e.g. ``tcp://127.0.0.1:5556``
@@ -38,7 +38,7 @@ class TelemetryClient(ZmqOwner):
         self._open_context(context)
         self.bad_messages = 0
         """Messages that could not be decoded (skipped)."""
-        assert self._context is not None  # a client always needs a context
+        assert self._context is not None  # a subscriber always needs a context
         sock = self._context.socket(zmq.SUB)
         try:
             sock.setsockopt(zmq.LINGER, 0)
@@ -55,9 +55,9 @@ class TelemetryClient(ZmqOwner):
 
     def receive(self, timeout: float | None = None) -> tuple[str, dict[str, Any]] | None:
         """The next ``(topic, payload)``, or None if none arrives within ``timeout`` [s]
-        (None waits forever). Raises TelemetryError if the client is closed."""
+        (None waits forever). Raises TelemetryError if the subscriber is closed."""
         if self._socket is None:
-            raise TelemetryError("telemetry client is closed")
+            raise TelemetryError("telemetry subscriber is closed")
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             wait_ms = None if deadline is None else max(0, math.ceil(
@@ -71,5 +71,5 @@ class TelemetryClient(ZmqOwner):
                 self.bad_messages += 1
 
     def close(self) -> None:
-        """Close the socket and, if the client owns it, terminate the context (idempotent)."""
+        """Close the socket and, if the subscriber owns it, terminate the context (idempotent)."""
         self._close_socket()

@@ -1,4 +1,4 @@
-"""ViconClient over a real UDP socket on 127.0.0.1 (no mocks).
+"""ViconReceiver over a real UDP socket on 127.0.0.1 (no mocks).
 
 The client binds port 0 and the test reads the port back; a plain UDP socket
 in the test is the sender. Waits are on data with timeouts, never sleeps.
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from groundstation.errors import ViconError
-from groundstation.vicon.client import ViconClient
+from groundstation.vicon.receiver import ViconReceiver
 
 TIMEOUT = 5.0  # generous upper bound; the tests return as soon as data arrives
 
@@ -43,7 +43,8 @@ def sender() -> Iterator[socket.socket]:
 
 def test_round_trip_over_loopback(sender: socket.socket) -> None:
     clock_value = 123.0  # injected clock: the stamp is exactly clock() - latency
-    with ViconClient("127.0.0.1", 0, "quad", latency_s=0.004, clock=lambda: clock_value) as client:
+    with ViconReceiver("127.0.0.1", 0, "quad", latency_s=0.004,
+                       clock=lambda: clock_value) as client:
         host, port = client.address
         assert host == "127.0.0.1"
         assert port > 0
@@ -70,7 +71,7 @@ def test_round_trip_over_loopback(sender: socket.socket) -> None:
 def test_monotonic_stamp_brackets_the_receive(sender: socket.socket) -> None:
     import time
 
-    with ViconClient("127.0.0.1", 0, "quad", latency_s=0.0) as client:
+    with ViconReceiver("127.0.0.1", 0, "quad", latency_s=0.0) as client:
         before = time.monotonic()
         for frame in (1, 2, 3):
             sender.sendto(datagram(frame, 0.0), client.address)
@@ -81,7 +82,7 @@ def test_monotonic_stamp_brackets_the_receive(sender: socket.socket) -> None:
 
 
 def test_bad_datagrams_do_not_stop_the_reader(sender: socket.socket) -> None:
-    with ViconClient("127.0.0.1", 0, "quad") as client:
+    with ViconReceiver("127.0.0.1", 0, "quad") as client:
         sender.sendto(b"", client.address)
         sender.sendto(b"\x01\x00\x00\x00\x05garbage", client.address)
         for frame in (5, 6, 7):
@@ -97,7 +98,7 @@ def test_bad_datagrams_do_not_stop_the_reader(sender: socket.socket) -> None:
 def test_bind_failure_is_a_vicon_error() -> None:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
         taken.bind(("127.0.0.1", 0))
-        client = ViconClient("127.0.0.1", taken.getsockname()[1], "quad")
+        client = ViconReceiver("127.0.0.1", taken.getsockname()[1], "quad")
         with pytest.raises(ViconError, match="cannot bind") as info:
             client.start()
         assert isinstance(info.value, OSError)
@@ -110,7 +111,7 @@ def test_reader_failure_is_raised_on_the_next_call() -> None:
     # ENOTSOCK, a real OS error, which must surface in the user's thread.
     read_fd, write_fd = os.pipe()
     try:
-        client = ViconClient("127.0.0.1", 0, "quad", poll_interval_s=0.02).start()
+        client = ViconReceiver("127.0.0.1", 0, "quad", poll_interval_s=0.02).start()
         os.dup2(read_fd, client.fileno())
         os.write(write_fd, b"x")
         with pytest.raises(ViconError, match="reader failed") as info:
@@ -127,7 +128,7 @@ def test_reader_failure_is_raised_on_the_next_call() -> None:
 
 
 def test_lifecycle() -> None:
-    client = ViconClient("127.0.0.1", 0, "quad")
+    client = ViconReceiver("127.0.0.1", 0, "quad")
     with pytest.raises(ViconError, match="not started"):
         client.get(timeout=0.0)
     with pytest.raises(ViconError, match="not started"):
@@ -141,7 +142,7 @@ def test_lifecycle() -> None:
 
 
 def test_close_wakes_a_blocked_get() -> None:
-    client = ViconClient("127.0.0.1", 0, "quad").start()
+    client = ViconReceiver("127.0.0.1", 0, "quad").start()
     result: list[object] = []
     waiter = threading.Thread(target=lambda: result.append(client.get(timeout=TIMEOUT * 4)))
     waiter.start()
@@ -152,7 +153,7 @@ def test_close_wakes_a_blocked_get() -> None:
 
 
 def test_filter_options_are_passed_through(sender: socket.socket) -> None:
-    with ViconClient(
+    with ViconReceiver(
         "127.0.0.1", 0, "quad", max_speed=0.1, position_slack=0.0, reanchor_after_s=60.0
     ) as client:
         assert client.filter.max_speed == 0.1
@@ -171,7 +172,7 @@ def test_from_config(sender: socket.socket) -> None:
     sim = load_config("config/sim.yaml")
     # Port 0 for the test (model_copy does not re-validate the 1..65535 range).
     cfg = sim.vicon.model_copy(update={"bind_address": "127.0.0.1", "port": 0})
-    with ViconClient.from_config(cfg, sim.safety, clock=lambda: 7.0) as client:
+    with ViconReceiver.from_config(cfg, sim.safety, clock=lambda: 7.0) as client:
         assert client.filter.plausibility.volume == cfg.plausible_volume(sim.safety)
         for frame in (1, 2, 3):
             sender.sendto(datagram(frame, 0.0, cfg.object_name.encode()), client.address)
@@ -209,7 +210,7 @@ def test_evidence_and_diagnosis_over_udp(sender: socket.socket) -> None:
         return body.ljust(1024, b"\0")
 
     with (socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as forger,
-          ViconClient("127.0.0.1", 0, "quad", latency_s=0.0, clock=Steps()) as client):
+          ViconReceiver("127.0.0.1", 0, "quad", latency_s=0.0, clock=Steps()) as client):
         last = b""
         for k in range(21):
             last = item(k + 1, 100.0)

@@ -19,10 +19,10 @@ Wire format, one JSON object per message (UTF-8, one frame, at most
 
 Nothing a client sends may crash, stall or wedge the flight loop (issue 14):
 
-* The daemon answers requests in a thread of its own (:meth:`ControlServer.serve`);
+* The daemon answers requests in a thread of its own (:meth:`RequestServer.serve`);
   a request that needs the flight is handed to the loop, which runs it between two
   ticks (:mod:`groundstation.app.api`), so no client ever delays a tick.
-  :meth:`ControlServer.poll` handles at most one request and never blocks; a
+  :meth:`RequestServer.poll` handles at most one request and never blocks; a
   multipart message is drained :data:`FRAMES_PER_POLL` frames a poll.
 * Every path through a poll is inside one error boundary: a request that is not
   one frame of UTF-8 JSON holding an object gets an error reply and is counted, a
@@ -35,7 +35,7 @@ Nothing a client sends may crash, stall or wedge the flight loop (issue 14):
 * The socket binds to loopback unless CURVE authenticates the clients
   (:mod:`groundstation.telemetry.curve`); any other bind is refused.
 
-:meth:`ControlServer.stats` gives the counters the daemon publishes in telemetry.
+:meth:`RequestServer.stats` gives the counters the daemon publishes in telemetry.
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ RECEIVE_QUEUE = 16
 """Requests queued per client (``ZMQ_RCVHWM``): bounds what a client can make us hold."""
 
 SERVE_WAIT_S = 0.05
-"""Longest wait of :meth:`ControlServer.serve` for a request before it checks whether to
+"""Longest wait of :meth:`RequestServer.serve` for a request before it checks whether to
 stop [s]."""
 
 REOPEN_RETRY_S = 0.05
@@ -92,8 +92,8 @@ _ERROR_CHARS = 200  # an error reply never echoes a large request back
 
 
 @dataclass
-class ControlStats:
-    """The control socket's counters."""
+class RequestStats:
+    """The request socket's counters."""
 
     answered: int = 0
     """Replies sent, error replies included."""
@@ -112,7 +112,7 @@ class ControlStats:
     """Times a failed socket was bound again."""
 
 
-class ControlServer(ZmqOwner):
+class RequestServer(ZmqOwner):
     """The daemon's end: a bound REP socket answered from the flight loop.
 
     endpoint : where to bind, e.g. ``tcp://127.0.0.1:5557`` or ``tcp://127.0.0.1:*``
@@ -127,7 +127,7 @@ class ControlServer(ZmqOwner):
                  curve: CurveServer | None = None) -> None:
         self.endpoint: str | None = None
         """The bound endpoint with the actual port (None when disabled)."""
-        self._stats = ControlStats()
+        self._stats = RequestStats()
         self._pending: bytes | None = None  # the reply owed to the request received
         self._draining = False  # inside a multipart request, discarding its frames
         self._reopen_at: float | None = None
@@ -155,7 +155,7 @@ class ControlServer(ZmqOwner):
 
     @classmethod
     def from_config(cls, config: TelemetryConfig,
-                    context: zmq.Context[Any] | None = None) -> ControlServer:
+                    context: zmq.Context[Any] | None = None) -> RequestServer:
         """A server on ``telemetry.control_endpoint`` (disabled when it is null), with CURVE
         when ``telemetry.control_server_key`` is set. TelemetryError for unusable keys."""
         curve = None
@@ -297,7 +297,7 @@ class ControlServer(ZmqOwner):
         return self._stats.malformed + self._stats.failed
 
     def stats(self) -> dict[str, int]:
-        """Every counter of :class:`ControlStats` by name (for telemetry)."""
+        """Every counter of :class:`RequestStats` by name (for telemetry)."""
         if self._keycheck is not None:
             self._stats.refused = self._keycheck.refused
         return asdict(self._stats)
