@@ -34,6 +34,7 @@ from groundstation.config import GroundStationConfig
 from groundstation.errors import GroundStationError
 from groundstation.flight.inputs import imu_scaling
 from groundstation.types import FloatArray
+from groundstation.vicon.frames import rotation_from_euler_deg
 from groundstation.vicon.receiver import ViconReceiver
 
 MOVING_POSITION_M = 0.005
@@ -387,13 +388,14 @@ def calibrate_vicon(config: GroundStationConfig, seconds: float = 10.0) -> Vicon
     rate = (len(t) - 1) / float(t[-1] - t[0]) if t[-1] > t[0] else math.nan
     measured = _mean_rotation(quaternions)  # body -> NED as the configuration maps it
     error_deg = float(np.degrees(measured.magnitude()))
-    world = config.vicon.world_to_ned.as_matrix()
+    world = rotation_from_euler_deg(config.vicon.world_to_ned.euler_xyz_deg)
     up_ok = bool(np.allclose(world @ np.array([0.0, 0.0, 1.0]), [0.0, 0.0, -1.0], atol=1e-6))
     suggestions: dict[str, Any] = {}
     if not up_ok:
         suggestions["vicon.world_to_ned"] = {"euler_xyz_deg": [180.0, 0.0, 0.0]}
     if error_deg > FRAME_TOLERANCE_DEG:
-        body = Rotation.from_matrix(config.vicon.body_to_object.as_matrix())
+        body_to_object = rotation_from_euler_deg(config.vicon.body_to_object.euler_xyz_deg)
+        body = Rotation.from_matrix(body_to_object)
         fixed = body * measured.inv()  # W R_obj B' = I with W R_obj = M B^T
         angles = [round(float(a), 1) + 0.0 for a in fixed.as_euler("XYZ", degrees=True)]
         suggestions["vicon.body_to_object"] = {"euler_xyz_deg": angles}

@@ -49,7 +49,6 @@ from groundstation.config import (
     GroundStationConfig,
     VehicleConfig,
     apply_overrides,
-    check_files,
     dump_config,
     key_lines,
     load_config,
@@ -87,13 +86,15 @@ _fail = fail
 
 
 def _checked_config(path: Path, overrides: dict[str, Any] | None = None) -> GroundStationConfig:
-    """The configuration a command runs with: the file, the CLI overrides, and the files it
-    names (waypoints, gain, CURVE keys) checked. ConfigError naming each problem."""
+    """The configuration a command runs with: the file, the CLI overrides, and what the
+    assembly checks (the files it names: waypoints, gain, CURVE keys; the virtual lab's
+    section). ConfigError naming each problem."""
+    from groundstation.flight.assembly import check_config
+
     config = load_config(path)
     if overrides:
         config = apply_overrides(config, overrides)
-    check_files(config, str(path), key_lines(path))
-    return config
+    return check_config(config, str(path), key_lines(path))
 
 
 def load(path: Path, overrides: dict[str, Any] | None = None) -> GroundStationConfig:
@@ -227,7 +228,9 @@ def trajectory_command(
         cfg = _checked_config(config, overrides) if config is not None else \
             apply_overrides(validate_config({}), overrides)
         if config is None:
-            check_files(cfg, "<defaults>")
+            from groundstation.flight.assembly import check_config
+
+            cfg = check_config(cfg, "<defaults>")
         lines, prepared = _trajectory_check(cfg)
     except (GroundStationError, ValueError, ArithmeticError) as exc:
         raise _fail(str(exc), 2) from exc

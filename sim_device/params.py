@@ -33,6 +33,7 @@ from groundstation.model.sensors import (
     VICON_POSITION_VARIANCE_TABLE_6_1,
     VICON_QUATERNION_VARIANCE_TABLE_6_1,
 )
+from groundstation.vicon.frames import rotation_from_euler_deg
 from sim_device.config import SimConfig, SimGroundEffectConfig, SimWindConfig
 
 if TYPE_CHECKING:
@@ -526,8 +527,8 @@ def _vicon_params(config: GroundStationConfig, sim: SimConfig) -> ViconSimParams
         outages=tuple((float(start), float(length)) for start, length in sv.outages),
         tilt_limit_deg=sv.tilt_limit_deg, object_name=vc.object_name, pad_to=sv.pad_to,
         volume_x=sv.volume_x, volume_y=sv.volume_y, volume_z=sv.volume_z,
-        world_to_ned=_mat3(vc.world_to_ned.as_matrix()),
-        body_to_object=_mat3(vc.body_to_object.as_matrix()),
+        world_to_ned=_mat3(rotation_from_euler_deg(vc.world_to_ned.euler_xyz_deg)),
+        body_to_object=_mat3(rotation_from_euler_deg(vc.body_to_object.euler_xyz_deg)),
     )
 
 

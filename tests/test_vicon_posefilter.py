@@ -383,8 +383,11 @@ def test_from_lab_config() -> None:
 
 def test_default_volume_is_the_configured_one() -> None:
     from groundstation.config import SafetyConfig, ViconConfig
+    from groundstation.vicon.plausibility import grown
 
-    assert ViconConfig().plausible_volume(SafetyConfig()) == DEFAULT_VOLUME
+    s = SafetyConfig()
+    assert grown((s.volume_x, s.volume_y, s.volume_z), ViconConfig().plausibility_margin_m) \
+        == DEFAULT_VOLUME
     assert PoseFilter(NAME).plausibility.volume == DEFAULT_VOLUME
     with pytest.raises(ConfigError):
         PoseFilter(NAME, plausible_volume=((0.0, 0.0), (-1.0, 1.0), (-1.0, 1.0)))

@@ -168,12 +168,15 @@ def test_filter_options_are_passed_through(sender: socket.socket) -> None:
 
 def test_from_config(sender: socket.socket) -> None:
     from groundstation.config import load_config
+    from groundstation.vicon.plausibility import grown
 
     sim = load_config("config/sim.yaml")
     # Port 0 for the test (model_copy does not re-validate the 1..65535 range).
     cfg = sim.vicon.model_copy(update={"bind_address": "127.0.0.1", "port": 0})
     with ViconReceiver.from_config(cfg, sim.safety, clock=lambda: 7.0) as client:
-        assert client.filter.plausibility.volume == cfg.plausible_volume(sim.safety)
+        s = sim.safety
+        assert client.filter.plausibility.volume == grown((s.volume_x, s.volume_y, s.volume_z),
+                                                          cfg.plausibility_margin_m)
         for frame in (1, 2, 3):
             sender.sendto(datagram(frame, 0.0, cfg.object_name.encode()), client.address)
         pose = client.get(timeout=TIMEOUT)

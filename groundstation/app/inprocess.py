@@ -23,6 +23,7 @@ import numpy as np
 
 from groundstation.app.recorder import FlightRecorder
 from groundstation.app.ticklog import TickLogger
+from groundstation.asctec.blocks import sensor_mask
 from groundstation.asctec.decoder import StreamDecoder, encode_frame
 from groundstation.asctec.messages import ConfigMsg, DataMsg
 from groundstation.config import GroundStationConfig
@@ -116,7 +117,7 @@ class InProcessFlight:
         self._ticklog = TickLogger(recorder) if recorder is not None else None
         """With a recorder the flight writes the same log as the daemon (times are the
         lab's simulated seconds; timing columns hold the core's compute time)."""
-        self.lab.write(encode_frame(ConfigMsg(config.serial.sensor_mask,
+        self.lab.write(encode_frame(ConfigMsg(sensor_mask(config.serial.sensors),
                                               config.serial.data_period_ms), self._profile))
 
     @property

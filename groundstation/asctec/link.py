@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any, Self
 import serial
 import structlog
 
+from groundstation.asctec.blocks import sensor_mask
 from groundstation.asctec.crc import DEFAULT_PROFILE, profile_init
 from groundstation.asctec.decoder import StreamDecoder, encode_frame
 from groundstation.asctec.keepalive import GAP_WARNING_S, CommandSchedule
@@ -269,7 +270,7 @@ class SerialLink(PortLink):
             command_rate=config.command_rate_hz,
             keepalive_slack=slack,
             stale_after=config.stale_command_s,
-            stream=ConfigMsg(config.sensor_mask, config.data_period_ms),
+            stream=ConfigMsg(sensor_mask(config.sensors), config.data_period_ms),
         )
 
     # --- user API -----------------------------------------------------------------

@@ -222,7 +222,10 @@ class EkfParams:
                              max_speed=vicon.max_speed_m_s,
                              max_rotation_rate=vicon.max_rotation_rate_rad_s)
             if safety is not None:
-                params = replace(params, plausible_volume=vicon.plausible_volume(safety))
+                m = vicon.plausibility_margin_m
+                x, y, z = safety.volume_x, safety.volume_y, safety.volume_z
+                params = replace(params, plausible_volume=(
+                    (x[0] - m, x[1] + m), (y[0] - m, y[1] + m), (z[0] - m, z[1] + m)))
         if safety is not None:
             params = replace(params, gravity_check_deg=safety.gravity_check_deg)
         if serial is not None:

@@ -10,11 +10,20 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import structlog
+from pydantic import BaseModel, ValidationError
 
-from groundstation.config import GroundStationConfig
+from groundstation.config import (
+    GroundStationConfig,
+    Problem,
+    TelemetryConfig,
+    file_problems,
+    raise_problems,
+    validation_problems,
+)
 from groundstation.control.base import Controller
 from groundstation.control.external_force import ExternalForceObserver
 from groundstation.control.feasibility import (
@@ -36,6 +45,57 @@ from groundstation.flight.commander import DEFAULT_MOVE_ACCEL_M_S2, Commander, M
 from groundstation.flight.inputs import quadrotor_params
 
 _log = structlog.get_logger(__name__)
+
+
+def check_config(config: GroundStationConfig, source: str = "<config>",
+                 lines: dict[str, int] | None = None) -> GroundStationConfig:
+    """What the configuration layer cannot check alone, before anything is connected: the
+    files it names (waypoints, H-infinity gain), the request socket's CURVE key files
+    (read as the socket will read them), and the ``sim:`` section, validated by the
+    installed virtual lab. Returns the configuration with that section as the lab's
+    model; raises ConfigError naming every problem (and its line: ``lines`` as
+    :func:`groundstation.config.key_lines` gives them)."""
+    problems = file_problems(config) + _curve_problems(config.telemetry)
+    sim = _lab_section(config.sim, problems)
+    if problems:
+        raise_problems(problems, source, lines)
+    return config if sim is None else config.model_copy(update={"sim": sim})
+
+
+def _curve_problems(t: TelemetryConfig) -> list[Problem]:
+    """The CURVE key files of ``telemetry.control_server_key`` and
+    ``telemetry.control_client_keys`` that cannot be read as keys."""
+    if t.control_endpoint is None or t.control_server_key is None:
+        return []
+    from groundstation.telemetry.curve import read_key_pair, read_public_keys
+
+    problems: list[Problem] = []
+    try:
+        read_key_pair(t.control_server_key)
+    except ValueError as exc:
+        problems.append(("telemetry.control_server_key", str(t.control_server_key), str(exc)))
+    try:
+        read_public_keys(t.control_client_keys or Path())  # set: the validator pairs them
+    except ValueError as exc:
+        problems.append(("telemetry.control_client_keys", str(t.control_client_keys),
+                         str(exc)))
+    return problems
+
+
+def _lab_section(section: object, problems: list[Problem]) -> BaseModel | None:
+    """The ``sim:`` section validated by the installed virtual lab (None without one); its
+    problems are added to ``problems`` with paths under ``sim``."""
+    if section is None:
+        return None
+    from groundstation.lab import LabNotInstalledError, virtual_lab
+
+    try:
+        return virtual_lab().validate_section(section)
+    except ValidationError as exc:
+        problems += validation_problems(exc, "sim")
+    except LabNotInstalledError as exc:
+        problems.append(("sim", "...", f"a virtual lab's section, but {exc}"))
+    return None
 
 
 def controller_from_config(config: GroundStationConfig) -> Controller:

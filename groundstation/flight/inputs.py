@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from groundstation.asctec.blocks import DATA_SIZE_BY_MASK
+from groundstation.asctec.blocks import DATA_SIZE_BY_MASK, sensor_mask
 from groundstation.asctec.decoder import FRAME_OVERHEAD
 from groundstation.asctec.ll import COMMAND_SIZE, ImuRawData
 from groundstation.asctec.messages import CommandMsg, DataMsg
@@ -89,7 +89,7 @@ def wire_time_s(config: GroundStationConfig) -> float:
         data_bytes = max(ImuRawData.PAYLOAD_SIZES) + FRAME_OVERHEAD
         command_bytes = COMMAND_SIZE
     else:
-        data_bytes = DATA_SIZE_BY_MASK[config.serial.sensor_mask] + FRAME_OVERHEAD
+        data_bytes = DATA_SIZE_BY_MASK[sensor_mask(config.serial.sensors)] + FRAME_OVERHEAD
         command_bytes = max(CommandMsg.PAYLOAD_SIZES) + FRAME_OVERHEAD
     return 10.0 * (data_bytes + command_bytes) / config.serial.baud
 

@@ -43,6 +43,13 @@ DEFAULT_VOLUME: Final[Box] = ((-2.0, 2.0), (-2.0, 2.0), (-2.5, 0.55))
 """The configuration's defaults: ``safety.volume_x/y/z`` (Table B.1: +/-1.5 m, 0..2 m
 height, z to +0.05 m) grown by ``vicon.plausibility_margin_m`` (0.5 m)."""
 
+def grown(box: Box, margin: float) -> Box:
+    """``box`` grown by ``margin`` [m] on every side (the flight volume grown by
+    ``vicon.plausibility_margin_m`` is where a pose can be)."""
+    (x0, x1), (y0, y1), (z0, z1) = box
+    return ((x0 - margin, x1 + margin), (y0 - margin, y1 + margin), (z0 - margin, z1 + margin))
+
+
 SIGHTING_MARGIN_M: Final = 10.0
 """How far beyond the plausible volume a pose is still a sighting, not absurd [m].
 Tracker's cameras look into one room; a lab room reaches a few metres, not ten, past

@@ -62,6 +62,7 @@ from groundstation.vicon.frames import (
     DEFAULT_BODY_TO_OBJECT,
     DEFAULT_WORLD_TO_NED,
     FrameConversion,
+    rotation_from_euler_deg,
 )
 from groundstation.vicon.health import LOGGER_NAME, RateMonitor, ViconEvidence, ViconHealth
 from groundstation.vicon.plausibility import (
@@ -71,6 +72,7 @@ from groundstation.vicon.plausibility import (
     ROTATION,
     Box,
     Plausibility,
+    grown,
 )
 from groundstation.vicon.streams import FOLLOWED, RIVAL, Gate, Streams
 
@@ -111,7 +113,8 @@ def filter_options(config: ViconConfig, safety: SafetyConfig) -> FilterOptions:
         max_speed=config.max_speed_m_s,
         max_rotation_rate=config.max_rotation_rate_rad_s,
         reanchor_poses=config.reanchor_poses,
-        plausible_volume=config.plausible_volume(safety),
+        plausible_volume=grown((safety.volume_x, safety.volume_y, safety.volume_z),
+                                config.plausibility_margin_m),
         min_rate_hz=config.min_rate_hz,
         max_rate_hz=MAX_RATE_FACTOR * config.expected_rate_hz,
     )
@@ -228,8 +231,8 @@ class PoseFilter:
         section (see :func:`filter_options`)."""
         return cls(
             config.object_name,
-            world_to_ned=config.world_to_ned.as_matrix(),
-            body_to_object=config.body_to_object.as_matrix(),
+            world_to_ned=rotation_from_euler_deg(config.world_to_ned.euler_xyz_deg),
+            body_to_object=rotation_from_euler_deg(config.body_to_object.euler_xyz_deg),
             latency_s=config.latency_s,
             logger=logger,
             **filter_options(config, safety),

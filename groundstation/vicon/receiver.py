@@ -30,7 +30,11 @@ import structlog
 
 from groundstation.errors import ViconError
 from groundstation.types import Pose
-from groundstation.vicon.frames import DEFAULT_BODY_TO_OBJECT, DEFAULT_WORLD_TO_NED
+from groundstation.vicon.frames import (
+    DEFAULT_BODY_TO_OBJECT,
+    DEFAULT_WORLD_TO_NED,
+    rotation_from_euler_deg,
+)
 from groundstation.vicon.health import ViconEvidence, ViconHealth
 from groundstation.vicon.posefilter import FilterOptions, PoseFilter, filter_options
 
@@ -114,8 +118,8 @@ class ViconReceiver:
             config.bind_address,
             config.port,
             config.object_name,
-            config.world_to_ned.as_matrix(),
-            config.body_to_object.as_matrix(),
+            rotation_from_euler_deg(config.world_to_ned.euler_xyz_deg),
+            rotation_from_euler_deg(config.body_to_object.euler_xyz_deg),
             config.latency_s,
             clock=clock,
             logger=logger,
