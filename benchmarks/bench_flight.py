@@ -9,7 +9,7 @@ child process:
   vehicle's 100 ms watchdog sees (the time after each COMMAND with a non-zero mask
   until the next one): its longest, and how many exceed 50 ms. The virtual lab's
   real-time runner stamps both instants (``sim_device/wire.py``);
-* from the daemon's side (issue 8): tick compute time p50/p99 (DATA sample in hand ->
+* from the daemon's side: tick compute time p50/p99 (DATA sample in hand ->
   COMMAND written), schedule jitter p99 (tick start minus the DATA frame's receive
   time), DATA-to-COMMAND latency p50/p99, the COMMAND rate sustained, the garbage
   collector's pauses, and the resident set size over the flight (flat = no growth
@@ -58,6 +58,7 @@ from groundstation.config import (  # noqa: E402
     dump_config,
     load_config,
 )
+from groundstation.flight.assembly import assemble  # noqa: E402
 from sim_device.realtime import SimDeviceProcess  # noqa: E402
 from sim_device.wire import WireRecord  # noqa: E402
 
@@ -120,7 +121,7 @@ def fly_once(base: GroundStationConfig, tmp: Path, k: int, seconds: float,
         sampler.start()
         cpu0 = time.process_time()
         try:
-            summary = FlightDaemon(cfg, duration_s=seconds).run()
+            summary = FlightDaemon(assemble(cfg), duration_s=seconds).run()
         finally:
             done.set()
         cpu = time.process_time() - cpu0

@@ -22,6 +22,10 @@ Channel = Literal["pitch", "roll", "yaw", "thrust"]
 CHANNELS: Final[tuple[Channel, ...]] = get_args(Channel)
 """Channels in ctrl-mask bit order (bit0 pitch, bit1 roll, bit2 yaw, bit3 thrust)."""
 
+Dialect = Literal["x3d", "asctec-ll"]
+"""The vehicle's serial dialect (``serial.protocol``): the X-3D's, or the AscTec AutoPilot
+LL's (docs/protocol.md); configured, never guessed from the bytes."""
+
 SensorBlockName = Literal["status", "gyro", "acc", "pressure", "rc"]
 """A block of the vehicle's DATA frame; the CONFIG mask bit is its index in
 :data:`SENSOR_BLOCK_NAMES` (spec section 3.3)."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -33,6 +33,7 @@ from groundstation.model.sensors import (
     VICON_POSITION_VARIANCE_TABLE_6_1,
     VICON_QUATERNION_VARIANCE_TABLE_6_1,
 )
+from groundstation.types import Dialect
 from groundstation.vicon.frames import rotation_from_euler_deg
 from sim_device.config import SimConfig, SimGroundEffectConfig, SimWindConfig
 
@@ -42,9 +43,8 @@ if TYPE_CHECKING:
 Vec3 = tuple[float, float, float]
 LossEncoding = Literal["missing", "zero", "held-identity"]
 LOSS_ENCODINGS: tuple[LossEncoding, ...] = ("missing", "zero", "held-identity")
-Dialect = Literal["x3d", "asctec-ll"]
-"""The serial dialect the virtual vehicle speaks (``serial.protocol``)."""
-DIALECTS: tuple[Dialect, ...] = ("x3d", "asctec-ll")
+DIALECTS: tuple[Dialect, ...] = get_args(Dialect)
+"""The serial dialects the virtual vehicle speaks (``serial.protocol``)."""
 X3D_COUNT_RANGE = (0, 4095)
 """The X-3D DATA stream's 12-bit ADC counts (spec 3.3)."""
 LL_COUNT_RANGE = (-32768, 32767)

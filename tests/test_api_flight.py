@@ -1,4 +1,4 @@
-"""Issue 19: a real-time flight driven only through the run-time API.
+"""A real-time flight driven only through the run-time API.
 
 The daemon flies ``--trajectory none`` against the virtual vehicle in its own process
 (a pty and UDP, as in the lab); a :class:`groundstation.client.Client` takes off,
@@ -31,6 +31,7 @@ from groundstation.client import (
     OutsideVolume,
 )
 from groundstation.config import apply_overrides, dump_config, load_config
+from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import Outcome, State
 from sim_device.realtime import SimDeviceProcess
 
@@ -62,7 +63,7 @@ def test_a_flight_driven_only_by_the_client(tmp_path: Path) -> None:
     with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as device:
         cfg = apply_overrides(cfg, {"serial.port": device.pty_path})
         abandon = threading.Event()  # a failed test stops the flight (the daemon lands)
-        daemon = FlightDaemon(cfg, stop=abandon)
+        daemon = FlightDaemon(assemble(cfg), stop=abandon)
         out: dict[str, FlightSummary] = {}
         runner = threading.Thread(target=lambda: out.setdefault("s", daemon.run()))
         runner.start()

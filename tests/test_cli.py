@@ -12,6 +12,7 @@ import pytest
 from typer.testing import CliRunner
 
 from groundstation.cli import app
+from groundstation.flight.assembly import assemble
 from groundstation.telemetry.requests import RequestServer
 
 REPO = Path(__file__).resolve().parents[1]
@@ -48,7 +49,7 @@ def test_report_and_export_of_a_recorded_flight(tmp_path: Path) -> None:
     cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {"trajectory.name": "hover"})
     with FlightRecorder.create(tmp_path, dump_config(cfg),
                                {"supervisor_states": [s.name for s in State]}) as rec:
-        fly_in_process(cfg, duration_s=3.0, max_time_s=40.0, recorder=rec)
+        fly_in_process(assemble(cfg), duration_s=3.0, max_time_s=40.0, recorder=rec)
         log = rec.directory
     res = runner.invoke(app, ["report", str(log), "--out", str(tmp_path / "rep")])
     assert res.exit_code == 0, res.output
@@ -174,7 +175,7 @@ def test_check_config_refuses_a_missing_waypoint_file(tmp_path: Path) -> None:
 
 
 def test_fly_help_documents_every_exit_code() -> None:
-    """`gs fly --help` names each exit code `gs fly` can return (issue 14 item 5)."""
+    """`gs fly --help` names each exit code `gs fly` can return."""
     from groundstation.app.fly import EXIT_CODES
 
     result = runner.invoke(app, ["fly", "--help"], terminal_width=100)

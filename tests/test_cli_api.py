@@ -1,4 +1,4 @@
-"""`gs keys`, and the run-time API commands' errors without a daemon (issue 19).
+"""`gs keys`, and the run-time API commands' errors without a daemon.
 
 Flights driven through these commands are in tests/test_api_e2e.py.
 """

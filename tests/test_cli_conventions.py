@@ -16,7 +16,7 @@ import typer
 from typer.testing import CliRunner
 
 from groundstation.cli import app
-from groundstation.cli_options import REPLY_TIMEOUT_S, WAIT_TIMEOUT_S
+from groundstation.cli.options import REPLY_TIMEOUT_S, WAIT_TIMEOUT_S
 from groundstation.telemetry.requests import RequestServer
 
 runner = CliRunner()

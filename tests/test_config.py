@@ -118,7 +118,7 @@ def test_load_config_file_problems(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="mapping"):
         load_config(scalar)
     empty = tmp_path / "empty.yaml"
-    empty.write_text("")  # an empty file is a mistake, not "all defaults" (issue 14)
+    empty.write_text("")  # an empty file is a mistake, not "all defaults"
     with pytest.raises(ConfigError, match="empty"):
         load_config(empty)
 

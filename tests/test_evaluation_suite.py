@@ -192,7 +192,7 @@ def test_vicon_outage_holds_on_the_imu_and_resumes(suite: FlownSuite) -> None:
                       State.DISARM, State.DONE]
     # HOLD from 0.5 s after the last pose until the third pose after the 1 s outage: after a
     # gap the pose filter believes a stream only once vicon.reanchor_poses (3) agree, 0.2 s
-    # at this scenario's 10 Hz (issue 14: never one pose); reached 0.8 s
+    # at this scenario's 10 Hz (never one pose); reached 0.8 s
     assert 0.3 < o.metrics["hold_s"] < 0.9 and o.metrics["hold_max_m"] < 0.1
     assert o.metrics["rms_m"] < 1.1 * suite.metrics["square-lqr-cv"]["rms_m"]
 

@@ -1,4 +1,4 @@
-"""`gs export --format mcap` (issue 18): a flight log the robotics viewers open.
+"""`gs export --format mcap`: a flight log the robotics viewers open.
 
 Read back with the `mcap` package's own reader: every JSON channel decodes against its
 JSON Schema's properties, every tick is there on every column topic with the flight log's

@@ -23,6 +23,7 @@ from groundstation.app.daemon import FlightDaemon, FlightSummary
 from groundstation.app.fly import fly_command
 from groundstation.app.recorder import read_flight
 from groundstation.config import apply_overrides, dump_config, load_config
+from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import State
 from groundstation.telemetry.requests import send_request
 from groundstation.telemetry.subscriber import TelemetrySubscriber
@@ -47,7 +48,7 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
     cfg_file.write_text(dump_config(cfg), encoding="utf-8")
     with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as device:
         cfg = apply_overrides(cfg, {"serial.port": device.pty_path})
-        daemon = FlightDaemon(cfg, duration_s=3.0)
+        daemon = FlightDaemon(assemble(cfg), duration_s=3.0)
         out: dict[str, FlightSummary] = {}
         runner = threading.Thread(target=lambda: out.setdefault("s", daemon.run()))
         runner.start()
@@ -69,7 +70,7 @@ def test_real_time_flight_over_pty_and_udp(tmp_path: Path) -> None:
             # 6 ms with the pilot). The vehicle stamps every frame that reaches it.
             echoed: list[str] = []
             t_second = time.monotonic()
-            second = fly_command(cfg, echo=echoed.append)
+            second = fly_command(assemble(cfg), echo=echoed.append)
             t_second_end = time.monotonic()
             time.sleep(0.2)  # the wire window below ends before the handover
             # Then hand yaw to the pilot and back over the request socket (what
@@ -222,7 +223,7 @@ def test_real_time_flight_in_the_asctec_ll_dialect(tmp_path: Path) -> None:
     cfg_file = tmp_path / "lab.yaml"
     cfg_file.write_text(dump_config(cfg), encoding="utf-8")
     with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as device:
-        summary = FlightDaemon(apply_overrides(cfg, {"serial.port": device.pty_path}),
+        summary = FlightDaemon(assemble(apply_overrides(cfg, {"serial.port": device.pty_path})),
                                duration_s=4.0).run()
         time.sleep(0.3)  # the final ctrl mask 0 reaches the vehicle
     assert summary.final_state is State.DONE and summary.success, summary.transitions
@@ -260,7 +261,7 @@ def test_an_ll_vehicle_that_stops_answering_polls_is_link_loss(tmp_path: Path) -
     cfg_file = tmp_path / "lab.yaml"
     cfg_file.write_text(dump_config(cfg), encoding="utf-8")
     with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as device:
-        summary = FlightDaemon(apply_overrides(cfg, {"serial.port": device.pty_path}),
+        summary = FlightDaemon(assemble(apply_overrides(cfg, {"serial.port": device.pty_path})),
                                duration_s=30.0).run()
         time.sleep(0.3)
     assert summary.final_state is State.LINK_LOST and not summary.success

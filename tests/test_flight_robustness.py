@@ -1,4 +1,4 @@
-"""Issue 14: nothing from outside may crash, blind or silently abort a flight.
+"""Nothing from outside may crash, blind or silently abort a flight.
 
 Real-time flights of the daemon against the virtual lab over a real pty and UDP, each
 reproducing one of the hostile tester's findings and asserting that the flight goes
@@ -38,6 +38,7 @@ from groundstation.app.daemon import FlightDaemon
 from groundstation.app.fly import fly_command
 from groundstation.app.recorder import read_flight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import State
 from sim_device.realtime import SimDeviceProcess, SimDeviceThread
 
@@ -133,7 +134,7 @@ def test_object_churn_does_not_stall_the_commands(tmp_path: Path) -> None:
     watchdog expired in the air. The virtual vehicle runs in its own process here, so it
     sees the daemon's pauses as the real X-3D would."""
     with vehicle_process(tmp_path) as (vehicle, cfg):
-        daemon = FlightDaemon(cfg, duration_s=6.0)
+        daemon = FlightDaemon(assemble(cfg), duration_s=6.0)
         with Churn() as churn, CollectorWatch() as watch:
             summary = daemon.run()
     assert vehicle.wire is not None
@@ -241,7 +242,7 @@ def test_a_failsafe_landing_exits_1_with_a_warning(tmp_path: Path) -> None:
     cfg = lab_config(tmp_path, **{"sim.vicon.outages": [[12.0, 60.0]]})
     lines: list[str] = []
     with SimDeviceThread(cfg) as device, capture_logs() as logs:
-        code = fly_command(apply_overrides(cfg, {"serial.port": device.info.pty_path}),
+        code = fly_command(assemble(apply_overrides(cfg, {"serial.port": device.info.pty_path})),
                            duration_s=30.0, echo=lines.append)
     text = "\n".join(lines)
     assert code == 1, text
@@ -260,7 +261,7 @@ def test_a_link_failure_ends_with_a_summary_and_a_final_row(tmp_path: Path) -> N
         cfg = apply_overrides(cfg, {"serial.port": device.info.pty_path})
         result: dict[str, int] = {}
         thread = threading.Thread(target=lambda: result.setdefault(
-            "code", fly_command(cfg, duration_s=30.0, echo=lines.append)))
+            "code", fly_command(assemble(cfg), duration_s=30.0, echo=lines.append)))
         thread.start()
         try:
             wait_until(lambda: any(line.startswith("TRACK") for line in lines), 30.0,

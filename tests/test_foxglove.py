@@ -31,6 +31,7 @@ from lab_helpers import free_udp_port, sim_config
 from scipy.spatial.transform import Rotation
 
 from groundstation.config import apply_overrides, dump_config
+from groundstation.flight.assembly import assemble
 from groundstation.model.quaternion import dcm_from_quat, quat_from_euler
 from groundstation.telemetry import foxglove as fx
 from groundstation.telemetry.schema import SCHEMA_VERSION, state_payload
@@ -426,8 +427,8 @@ def test_foxglove_client_sees_the_flight(tmp_path: Path) -> None:
                     subscriptions.append({"id": k, "channelId": cid})
                 ws.send(json.dumps({"op": "subscribe", "subscriptions": subscriptions}))
 
-                daemon = FlightDaemon(apply_overrides(cfg, {"serial.port": device.pty_path}),
-                                      duration_s=2.0)
+                flying = apply_overrides(cfg, {"serial.port": device.pty_path})
+                daemon = FlightDaemon(assemble(flying), duration_s=2.0)
                 runner = threading.Thread(target=lambda: out.setdefault("s", daemon.run()))
                 runner.start()
                 try:

@@ -21,6 +21,7 @@ from typer.testing import CliRunner
 from groundstation.app.inprocess import fly_in_process
 from groundstation.cli import app
 from groundstation.errors import IdentificationError
+from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import State
 from groundstation.identification.lift import thrust_from_hover_stick
 
@@ -76,7 +77,7 @@ def _sag(model: list[float]) -> float:
     cfg = sim_config(**{"trajectory.name": "hover", "channels.auto": ["thrust"],
                         "vehicle.thrust_poly": model,
                         "sim.thrust_scale": TRUE_LIFT / model_scale})
-    result = fly_in_process(cfg, duration_s=4.0, max_time_s=40.0)
+    result = fly_in_process(assemble(cfg), duration_s=4.0, max_time_s=40.0)
     assert result.final_state is State.DONE, result.transitions
     climbing = result.during(State.TAKEOFF)
     return float(np.max(result.trace["true_pos"][climbing, 2]

@@ -1,4 +1,4 @@
-"""IMU scale identification (issue 17 item 4) against the virtual lab with planted values.
+"""IMU scale identification against the virtual lab with planted values.
 
 The virtual lab's IMU has true scales that differ from the configured Table 6.2 ones by
 factors drawn with ``sim.scale_error`` (``ImuModel.gyro_scale_true``/``acc_scale_true``:

@@ -1,4 +1,4 @@
-"""The ground station does not depend on its virtual lab (issue 15).
+"""The ground station does not depend on its virtual lab.
 
 Dependencies run one way: ``sim_device`` imports ``groundstation``, never the reverse.
 The ground station finds the lab through the ``groundstation.labs`` entry point

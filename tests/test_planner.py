@@ -28,6 +28,7 @@ from lab_helpers import sim_config
 
 from groundstation.app.planner_process import PLANNER_NICE, PlannerProcess
 from groundstation.app.realtime import CollectorPacer, fifo_priority
+from groundstation.flight.assembly import assemble
 from groundstation.flight.commander import Commander, CommandRefusedError
 from groundstation.flight.planner import (
     GoTo,
@@ -35,10 +36,9 @@ from groundstation.flight.planner import (
     PlanMotion,
     Planner,
     PlannerSettings,
-    settings_from_config,
 )
 
-SETTINGS = settings_from_config(sim_config(**{"trajectory.name": "none"}))
+SETTINGS = assemble(sim_config(**{"trajectory.name": "none"})).planner
 HOME = np.array([0.0, 0.0, -1.0])
 
 

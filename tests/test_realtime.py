@@ -94,7 +94,7 @@ def test_config_defaults_and_errors() -> None:
 
 @pytest.mark.slow
 def test_collector_pacer_freezes_and_runs_full_collections_only_after_a_command() -> None:
-    """Issue 14 item 3: no full collection in the middle of a tick; young ones go on."""
+    """No full collection in the middle of a tick; young ones go on."""
     import gc
 
     thresholds = gc.get_threshold()

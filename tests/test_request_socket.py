@@ -18,6 +18,7 @@ from groundstation.app.daemon import FlightDaemon
 from groundstation.config import validate_config
 from groundstation.endpoints import local_endpoint
 from groundstation.errors import TelemetryError
+from groundstation.flight.assembly import assemble
 from groundstation.telemetry.curve import CurveClient, load_client_keys, load_server_keys
 from groundstation.telemetry.requests import (
     FRAMES_PER_POLL,
@@ -115,7 +116,7 @@ def test_port_in_use_names_the_endpoint() -> None:
     ({"request": "channels", "auto": "thrust"}, "one or more"),
 ])
 def test_daemon_refuses_bad_channel_requests(request_: dict[str, Any], error: str) -> None:
-    daemon = FlightDaemon(validate_config({}))
+    daemon = FlightDaemon(assemble(validate_config({})))
     before = daemon.core.auto_channels
     reply = daemon.handle_request(request_)
     assert reply["ok"] is False and error in reply["error"]
@@ -123,7 +124,7 @@ def test_daemon_refuses_bad_channel_requests(request_: dict[str, Any], error: st
 
 
 def test_daemon_sets_and_reports_channels() -> None:
-    daemon = FlightDaemon(validate_config({}))
+    daemon = FlightDaemon(assemble(validate_config({})))
     assert daemon.handle_request({"request": "channels"}) == {
         "ok": True, "auto": ["pitch", "roll", "yaw", "thrust"], "state": "PREFLIGHT"}
     reply = daemon.handle_request({"request": "channels", "auto": ["thrust", "yaw"]})
@@ -132,7 +133,7 @@ def test_daemon_sets_and_reports_channels() -> None:
 
 
 # --------------------------------------------------------------------------- hostile requests
-# Issue 14 item 4: nothing a client sends may raise out of the loop's poll, stall it, or leave
+# Nothing a client sends may raise out of the loop's poll, stall it, or leave
 # the REP socket owing a reply; each bad request gets an error reply (or, too large, never
 # reaches us) and is counted, and the server keeps serving.
 
@@ -342,7 +343,7 @@ def test_key_files_that_cannot_be_used_are_named(keys: dict[str, Path], tmp_path
 def test_the_daemon_handler_behind_a_real_socket_survives_hostile_clients() -> None:
     """The loop's call, ``control.poll(daemon.handle_request)``, against garbage and then a
     real request: the garbage is answered and counted, the request takes effect."""
-    daemon = FlightDaemon(validate_config({}))
+    daemon = FlightDaemon(assemble(validate_config({})))
     with RequestServer("tcp://127.0.0.1:*") as server, \
             _serving(server, daemon.handle_request):
         assert server.endpoint is not None
@@ -361,7 +362,7 @@ def test_the_daemon_handler_behind_a_real_socket_survives_hostile_clients() -> N
 def test_the_flight_summary_shows_the_control_counters() -> None:
     from groundstation.app.fly import summary_lines
 
-    daemon = FlightDaemon(validate_config({}))
+    daemon = FlightDaemon(assemble(validate_config({})))
     summary = replace(daemon._summary(), control={"answered": 4, "malformed": 2, "refused": 1,
                                                   "failed": 0})
     line = next(x for x in summary_lines(summary) if "control socket" in x)

@@ -15,6 +15,7 @@ import zmq
 
 from groundstation.config import TelemetryConfig
 from groundstation.errors import GroundStationError
+from groundstation.flight.assembly import publisher_params
 from groundstation.telemetry import (
     SCHEMA_VERSION,
     TelemetryPublisher,
@@ -201,9 +202,10 @@ def test_close_releases_the_port_and_context() -> None:
 
 
 def test_disabled_publisher_and_config() -> None:
-    with TelemetryPublisher.from_config(TelemetryConfig(enabled=False)) as pub:
+    with TelemetryPublisher.from_params(publisher_params(TelemetryConfig(enabled=False))) as pub:
         assert not pub.enabled and not pub.maybe_publish(0.0, snapshot)
-    with TelemetryPublisher.from_config(TelemetryConfig(endpoint=ANY_PORT, rate_hz=5.0)) as pub:
+    enabled = publisher_params(TelemetryConfig(endpoint=ANY_PORT, rate_hz=5.0))
+    with TelemetryPublisher.from_params(enabled) as pub:
         assert pub.enabled
         assert [pub.maybe_publish(t, dict) for t in (0.0, 0.1, 0.19, 0.2)] == [
             True, False, False, True]  # 5 Hz: every 0.2 s

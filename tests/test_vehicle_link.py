@@ -1,4 +1,4 @@
-"""One link test suite, run against both serial dialects (issue 16).
+"""One link test suite, run against both serial dialects.
 
 Like python-can's back-to-back tests, every behaviour the flight loop relies on is
 checked through the one interface (:func:`groundstation.asctec.dialect.open_link`)
@@ -40,6 +40,7 @@ from groundstation.asctec.ll_link import PollSchedule
 from groundstation.asctec.messages import CommandMsg, ConfigMsg, DataMsg
 from groundstation.config import validate_config
 from groundstation.errors import ConfigError
+from groundstation.flight.assembly import imu_scaling, link_params
 from groundstation.flight.inputs import DataFrontEnd, VehicleStatus
 from groundstation.types import Sticks
 
@@ -196,7 +197,7 @@ def vehicle(request: pytest.FixtureRequest) -> Iterator[PtyVehicle]:
 def link_for(vehicle: PtyVehicle, **serial: object) -> VehicleLink:
     cfg = validate_config({"serial": {"protocol": vehicle.dialect, "port": vehicle.path,
                                       **serial}})
-    link = open_link(cfg.serial)
+    link = open_link(link_params(cfg.serial))
     vehicle.release_slave()
     return link
 
@@ -234,7 +235,7 @@ def test_both_dialects_give_the_loop_the_same_vehicle_status(vehicle: PtyVehicle
     """Battery, switch, pilot sticks and whether commands are applied: the flight core sees
     the same :class:`VehicleStatus` whichever dialect carried it."""
     cfg = validate_config({"serial": {"protocol": vehicle.dialect, "port": vehicle.path}})
-    front = DataFrontEnd(cfg)
+    front = DataFrontEnd(imu_scaling(cfg.vehicle))
     with link_for(vehicle) as link:
         link.start_stream()
         link.send(CommandMsg(thrust=1000, ctrl=0x0F))
@@ -294,7 +295,7 @@ def test_close_hands_back_only_if_it_flew(vehicle: PtyVehicle) -> None:
 
 def link_for_reopened(vehicle: PtyVehicle) -> VehicleLink:
     cfg = validate_config({"serial": {"protocol": vehicle.dialect, "port": vehicle.path}})
-    return open_link(cfg.serial)
+    return open_link(link_params(cfg.serial))
 
 
 def test_a_vehicle_that_stops_answering_is_a_silent_stream(vehicle: PtyVehicle) -> None:

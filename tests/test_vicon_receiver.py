@@ -166,17 +166,18 @@ def test_filter_options_are_passed_through(sender: socket.socket) -> None:
         assert client.health().outliers == 1
 
 
-def test_from_config(sender: socket.socket) -> None:
+def test_from_assembled_params(sender: socket.socket) -> None:
+    from dataclasses import replace
+
     from groundstation.config import load_config
-    from groundstation.vicon.plausibility import grown
+    from groundstation.flight.assembly import plausible_volume, vicon_params
 
     sim = load_config("config/sim.yaml")
-    # Port 0 for the test (model_copy does not re-validate the 1..65535 range).
-    cfg = sim.vicon.model_copy(update={"bind_address": "127.0.0.1", "port": 0})
-    with ViconReceiver.from_config(cfg, sim.safety, clock=lambda: 7.0) as client:
-        s = sim.safety
-        assert client.filter.plausibility.volume == grown((s.volume_x, s.volume_y, s.volume_z),
-                                                          cfg.plausibility_margin_m)
+    cfg = sim.vicon
+    # Port 0 for the test: any free one
+    params = replace(vicon_params(cfg, sim.safety), bind_address="127.0.0.1", port=0)
+    with ViconReceiver.from_params(params, clock=lambda: 7.0) as client:
+        assert client.filter.plausibility.volume == plausible_volume(cfg, sim.safety)
         for frame in (1, 2, 3):
             sender.sendto(datagram(frame, 0.0, cfg.object_name.encode()), client.address)
         pose = client.get(timeout=TIMEOUT)

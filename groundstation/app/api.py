@@ -53,9 +53,9 @@ from typing import Any, ClassVar, Protocol, TypeVar
 
 import structlog
 
-from groundstation.config import GroundStationConfig
 from groundstation.control.base import heading_of
 from groundstation.flight import boundary
+from groundstation.flight.assembly import trajectory_spec
 from groundstation.flight.commander import (
     PLAN_LEAD_S,
     Commander,
@@ -65,6 +65,7 @@ from groundstation.flight.commander import (
     Planned,
 )
 from groundstation.flight.core import FlightCore
+from groundstation.flight.params import FlightParams
 from groundstation.flight.planner import (
     Follow,
     Followable,
@@ -76,7 +77,6 @@ from groundstation.flight.planner import (
     PrepareFollow,
     TakeOff,
     plan_with,
-    settings_from_config,
 )
 from groundstation.flight.supervisor import State
 from groundstation.model.quaternion import rotate
@@ -173,7 +173,7 @@ class LoopInbox:
 
 
 class MotionApi:
-    """Answers API requests for ``core``'s flight.
+    """Answers API requests for ``core``'s flight, flown with ``params``.
 
     in_loop : runs a function in the flight loop and returns its result (the daemon's
         queue to its loop; by default in the caller's thread, for a core nobody else steps)
@@ -183,21 +183,21 @@ class MotionApi:
     clock, wall_clock : monotonic and unix time [s]
     """
 
-    def __init__(self, core: FlightCore, config: GroundStationConfig, *,
+    def __init__(self, core: FlightCore, params: FlightParams, *,
                  in_loop: InLoop = _in_place, planner: Planner | None = None,
                  health: Callable[[], Mapping[str, Any]] = dict,
                  clock: Callable[[], float] = time.monotonic,
                  wall_clock: Callable[[], float] = time.time) -> None:
         self.core = core
-        self.config = config
+        self.params = params
         self._in_loop = in_loop
-        settings = settings_from_config(config)
+        settings = params.planner
         self._planner: Planner = planner if planner is not None else InlinePlanner(settings)
         self._volume = settings.limits.volume
         self._max_yaw_rate = settings.limits.flight.max_yaw_rate_rad_s
-        self._min_step = 1.0 / config.serial.command_rate_hz
-        self._plan_timeout = config.api.plan_timeout_s
-        self._start_horizon = config.api.start_horizon_s
+        self._min_step = params.command_period_s
+        self._plan_timeout = params.daemon.plan_timeout_s
+        self._start_horizon = params.daemon.start_horizon_s
         self._health = health
         self._clock = clock
         self._wall = wall_clock
@@ -254,9 +254,9 @@ class MotionApi:
             job = PrepareFollow(None, boundary.waypoint_rows(
                 request["waypoints"], self._volume, self._min_step), duration, start_in)
         else:
-            job = PrepareFollow(boundary.trajectory_section(
-                request["trajectory"], self._volume, self._max_yaw_rate), None, duration,
-                start_in)
+            section = boundary.trajectory_section(request["trajectory"], self._volume,
+                                                  self._max_yaw_rate)
+            job = PrepareFollow(trajectory_spec(section), None, duration, start_in)
         self._in_loop(self._tracking)  # before the expensive part, as every motion
         followable: Followable = self._planner.run(job, deadline)
 
@@ -347,7 +347,7 @@ class MotionApi:
         if commander is None:
             raise CommandRefusedError(
                 "state", f"this flight flies its configured trajectory "
-                f"({self.config.trajectory.name}); motions need `gs fly --trajectory none`")
+                f"({self.params.trajectory.name}); motions need `gs fly --trajectory none`")
         return commander
 
     def _tracking(self) -> Commander:

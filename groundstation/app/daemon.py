@@ -86,13 +86,13 @@ from groundstation.app.ticklog import TickLogger
 from groundstation.app.timing import TimingHistogram
 from groundstation.asctec.dialect import VehicleLink, open_link
 from groundstation.asctec.stats import LinkStats
-from groundstation.config import GroundStationConfig, dump_config
 from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import LinkError
+from groundstation.flight.assembly import config_text
 from groundstation.flight.core import FlightCore, TickResult
 from groundstation.flight.inputs import DataFrontEnd, VehicleStatus, with_vicon
-from groundstation.flight.planner import settings_from_config
+from groundstation.flight.params import FlightParams
 from groundstation.flight.supervisor import FailsafeEvent, Outcome, State, Transition
 from groundstation.logs import log_through_sink
 from groundstation.telemetry.publisher import TelemetryPublisher
@@ -205,9 +205,10 @@ class _Stats:
 class FlightDaemon:
     """One real-time flight. Build it, then :meth:`run` it (blocks until the flight ends).
 
-    config : validated configuration (``serial.port`` is the X-3D)
+    params : the flight's parameters (:func:`groundstation.flight.assembly.assemble`;
+        ``link.port`` is the vehicle's)
     duration_s : trajectory time before landing (default one trajectory period)
-    controller, trajectory : replace the ones the configuration names
+    controller, trajectory : replace the ones the parameters name
     progress : called about once a second with a one-line status, from the loop: it
         must return at once (``gs fly`` passes a :class:`~groundstation.logs.LineSink`'s
         ``put``); an exception it raises is logged and ends the progress lines, not the
@@ -215,18 +216,18 @@ class FlightDaemon:
     stop : an extra way to ask for a stop (counts like a signal), e.g. from a test
     """
 
-    def __init__(self, config: GroundStationConfig, *, duration_s: float | None = None,
+    def __init__(self, params: FlightParams, *, duration_s: float | None = None,
                  controller: Controller | None = None, trajectory: Trajectory | None = None,
                  progress: Callable[[str], None] | None = None,
                  stop: threading.Event | None = None) -> None:
-        self.config = config
-        self.core = FlightCore(config, controller=controller, trajectory=trajectory,
+        self.params = params
+        self.core = FlightCore(params, controller=controller, trajectory=trajectory,
                                duration_s=duration_s)
-        self._front = DataFrontEnd(config)
+        self._front = DataFrontEnd(params.imu)
         self._progress = progress
         self._stop_event = stop
-        self._stops = StopRequests(config.safety.second_signal_after_s)
-        self._period = config.serial.data_period_ms / 1000.0
+        self._stops = StopRequests(params.daemon.second_signal_after_s)
+        self._period = params.link.data_period_ms / 1000.0
         self._stats = _Stats()
         self.log_dir = ""
         self.telemetry_endpoint: str | None = None
@@ -237,9 +238,8 @@ class FlightDaemon:
         self._last: TickResult | None = None  # the last tick's result (final telemetry)
         self._inbox = LoopInbox()
         self._front_health: Callable[[], dict[str, object]] = dict
-        self._planner = PlannerProcess(settings_from_config(config),
-                                       timeout_s=config.api.plan_timeout_s)
-        self._api = MotionApi(self.core, config, in_loop=self._inbox.call,
+        self._planner = PlannerProcess(params.planner, timeout_s=params.daemon.plan_timeout_s)
+        self._api = MotionApi(self.core, params, in_loop=self._inbox.call,
                               planner=self._planner, health=lambda: self._front_health())
         self.ready = threading.Event()
         """Set once every resource is open and the loop is about to start."""
@@ -261,27 +261,27 @@ class FlightDaemon:
     def run(self) -> FlightSummary:
         """Fly. Raises LinkError/ViconError/GroundStationError if a resource cannot be opened;
         once flying, failures are supervisor transitions and the flight ends with a summary."""
-        cfg = self.config
+        p = self.params
         notifier = SdNotifier.from_env()
         with ExitStack() as stack:
             # first in, last out: every log line of the flight, its closing ones too
             stack.enter_context(log_through_sink())
             stack.callback(notifier.stopping, "stopping: vehicle handed back")
             # first: the serial, Vicon and ZeroMQ threads started below inherit it
-            stack.enter_context(fifo_priority(cfg.realtime.fifo_priority))
-            link = open_link(cfg.serial)  # the configured dialect
+            stack.enter_context(fifo_priority(p.daemon.fifo_priority))
+            link = open_link(p.link)  # the configured dialect
             stack.callback(link.close)  # sends the final COMMAND with ctrl mask 0
-            vicon = ViconReceiver.from_config(cfg.vicon, cfg.safety).start()
+            vicon = ViconReceiver.from_params(p.vicon).start()
             stack.callback(vicon.close)
             # the configured directory, else a user's (one line says so): logdir.py
-            recorder = create_flight_log(cfg.logging.flight_log_dir, dump_config(cfg),
+            recorder = create_flight_log(p.daemon.log_dir, config_text(p),
                                          {"supervisor_states": [s.name for s in State]})
             stack.callback(recorder.close)
             self.log_dir = str(recorder.directory)
-            telemetry = TelemetryPublisher.from_config(cfg.telemetry)
+            telemetry = TelemetryPublisher.from_params(p.telemetry)
             stack.callback(telemetry.close)
             self.telemetry_endpoint = telemetry.endpoint
-            server = RequestServer.from_config(cfg.telemetry)
+            server = RequestServer.from_params(p.requests)
             stack.callback(server.close)
             self.control_endpoint = server.endpoint
             self._request_stats = server.stats
@@ -290,16 +290,16 @@ class FlightDaemon:
                     stack.enter_context(self._planner)
                 stack.enter_context(self._serving(server))
             stack.enter_context(on_stop_signals(self._on_signal))
-            stack.enter_context(cpu_latency_request(cfg.realtime.cpu_dma_latency_us))
-            stack.enter_context(switch_interval(cfg.realtime.switch_interval_ms / 1000.0))
+            stack.enter_context(cpu_latency_request(p.daemon.cpu_dma_latency_us))
+            stack.enter_context(switch_interval(p.daemon.switch_interval_s))
             # its full collection runs now, before the vehicle streams, and freezes all
             # that is open
-            pacer = stack.enter_context(CollectorPacer(cfg.realtime.paced_gc))
+            pacer = stack.enter_context(CollectorPacer(p.daemon.paced_gc))
             link.start_stream()
             notifier.ready("preflight")
             self.ready.set()
-            log.info("flight starting", port=cfg.serial.port, vicon_port=cfg.vicon.port,
-                     log=self.log_dir, controller=cfg.controller.type)
+            log.info("flight starting", port=p.link.port, vicon_port=p.vicon.port,
+                     log=self.log_dir, controller=p.controller_type)
             self._front_health = partial(self._health_section, link, vicon)
             try:
                 self._loop(_Io(link, vicon, recorder, telemetry, notifier, pacer))
@@ -519,7 +519,7 @@ class FlightDaemon:
             events=list(sup.events), max_command_gap_s=s.max_command_gap,
             keepalive_resends=s.keepalive_resends, collector=s.collector,
             control=self._request_stats(), link=s.link,
-            protocol=self.config.serial.protocol, baud=self.config.serial.baud,
+            protocol=self.params.link.protocol, baud=self.params.link.baud,
             log=log_loss if log_loss is not None else LogLoss(),
         )
 

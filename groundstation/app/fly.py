@@ -36,6 +36,7 @@ import sys
 import tempfile
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 
 from groundstation.app.daemon import (
@@ -44,9 +45,10 @@ from groundstation.app.daemon import (
     FlightSummary,
     link_figures,
 )
-from groundstation.config import GroundStationConfig, apply_overrides
+from groundstation.config import apply_overrides
 from groundstation.errors import ConfigError, GroundStationError
 from groundstation.flight.core import FlightCore
+from groundstation.flight.params import FlightParams
 from groundstation.flight.supervisor import Outcome
 from groundstation.logs import LineSink, log_through_sink, retire_lost_stream, stream_writer
 
@@ -133,10 +135,11 @@ def summary_lines(summary: FlightSummary) -> list[str]:
     return lines
 
 
-def fly_command(config: GroundStationConfig, *, duration_s: float | None = None,
+def fly_command(params: FlightParams, *, duration_s: float | None = None,
                 demo: bool = False, echo: Echo | None = None,
                 after_flight: Sequence[AfterFlight] = ()) -> int:
-    """Fly once; with ``demo`` start the virtual lab first (its truth is kept in the
+    """Fly once with ``params`` (:func:`groundstation.flight.assembly.assemble`); with
+    ``demo`` start the virtual lab first (its truth is kept in the
     flight's log as ``truth.npz``). Then run the ``after_flight`` steps in order and print
     their lines. Returns the flight's exit code (see the module docstring): an
     after-flight step changes none.
@@ -150,18 +153,18 @@ def fly_command(config: GroundStationConfig, *, duration_s: float | None = None,
     out = LineSink(stream_writer(stdout) if echo is None else echo, "stdout")
     try:
         with log_through_sink():
-            return _fly(config, duration_s, demo, out.put, after_flight)
+            return _fly(params, duration_s, demo, out.put, after_flight)
     finally:
         out.close()
         if echo is None:
             retire_lost_stream(stdout, out)
 
 
-def _fly(config: GroundStationConfig, duration_s: float | None, demo: bool,
+def _fly(params: FlightParams, duration_s: float | None, demo: bool,
          echo: Echo, after_flight: Sequence[AfterFlight]) -> int:
     try:  # the checks `gs check-config` runs, before anything is connected; the daemon
         # builds the core again (about 50 ms) for the configuration it flies
-        FlightCore(config, duration_s=duration_s)
+        FlightCore(params, duration_s=duration_s)
     except (GroundStationError, ValueError, ArithmeticError) as exc:
         echo(f"error: {exc}")
         return EXIT_USAGE
@@ -171,13 +174,13 @@ def _fly(config: GroundStationConfig, duration_s: float | None, demo: bool,
         truth_file: Path | None = None
         try:
             if demo:
-                if config.sim is None:
+                if params.source.sim is None:  # the lab's own section
                     echo("error: --demo needs a configuration with a `sim:` section "
                          "(config/sim.yaml)")
                     return EXIT_USAGE
                 workdir = Path(keep.enter_context(tempfile.TemporaryDirectory(prefix="gs-demo-")))
-                config, truth_file = _start_virtual_lab(config, stack, workdir, echo)
-            summary = FlightDaemon(config, duration_s=duration_s, progress=echo).run()
+                params, truth_file = _start_virtual_lab(params, stack, workdir, echo)
+            summary = FlightDaemon(params, duration_s=duration_s, progress=echo).run()
         except ConfigError as exc:
             echo(f"error: {exc}")
             return EXIT_USAGE
@@ -196,24 +199,26 @@ def _fly(config: GroundStationConfig, duration_s: float | None, demo: bool,
     return summary.exit_code
 
 
-def _start_virtual_lab(config: GroundStationConfig, stack: ExitStack, workdir: Path,
-                       echo: Echo) -> tuple[GroundStationConfig, Path]:
+def _start_virtual_lab(params: FlightParams, stack: ExitStack, workdir: Path,
+                       echo: Echo) -> tuple[FlightParams, Path]:
     """Start the installed virtual lab (:func:`groundstation.lab.virtual_lab`) in a child
     process, working in ``workdir``, for the block ``stack`` closes; return the
-    configuration pointing at its pty and its truth file (written when it stops). A
+    parameters with the link on its pty and its truth file (written when it stops). A
     process of its own, as the vehicle is: a pause of this one (a loaded machine) cannot
     stop the vehicle's clock."""
     from groundstation.lab import virtual_lab
 
     plugin = virtual_lab()
     try:
-        lab = stack.enter_context(plugin.start(config, workdir)).announcement
+        lab = stack.enter_context(plugin.start(params.source, workdir)).announcement
     except RuntimeError as exc:
         raise GroundStationError(f"the virtual lab did not start: {exc}") from exc
     address, port = lab.vicon_target
-    echo(f"virtual lab: vehicle ({config.serial.protocol}) on {lab.serial_port}, "
+    echo(f"virtual lab: vehicle ({params.link.protocol}) on {lab.serial_port}, "
          f"Vicon -> udp://{address}:{port}")
-    return apply_overrides(config, {"serial.port": lab.serial_port}), lab.truth_file
+    pty = lab.serial_port  # the flight log's copy of the configuration says it too
+    return replace(params, link=replace(params.link, port=pty),
+                   source=apply_overrides(params.source, {"serial.port": pty})), lab.truth_file
 
 
 def _keep_truth(log_dir: Path, truth_file: Path | None) -> Path | None:

@@ -8,7 +8,8 @@ clock are left out, so a flight runs many times faster than real time and is
 the same, bit for bit, for a given seed.
 
 The lab is anything that satisfies :class:`groundstation.lab.Lab`; by default the
-installed virtual lab builds one for the configuration (:func:`groundstation.lab.virtual_lab`).
+installed virtual lab builds one for the configuration the flight's parameters were
+assembled from (:func:`groundstation.lab.virtual_lab`).
 Used by the tests and the virtual lab's evaluation suite (``gs eval --fast``).
 """
 
@@ -23,14 +24,13 @@ import numpy as np
 
 from groundstation.app.recorder import FlightRecorder
 from groundstation.app.ticklog import TickLogger
-from groundstation.asctec.blocks import sensor_mask
 from groundstation.asctec.decoder import StreamDecoder, encode_frame
 from groundstation.asctec.messages import ConfigMsg, DataMsg
-from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
 from groundstation.flight.core import FlightCore, TickResult
 from groundstation.flight.inputs import DataFrontEnd, with_vicon
+from groundstation.flight.params import FlightParams
 from groundstation.flight.supervisor import State, Transition
 from groundstation.lab import Lab, virtual_lab
 from groundstation.types import FloatArray, Pose
@@ -90,25 +90,26 @@ def _rotate_to_earth(q: FloatArray, v: FloatArray) -> FloatArray:
 
 class InProcessFlight:
     """One flight of :class:`FlightCore` against a :class:`~groundstation.lab.Lab`, stepped
-    by hand (``lab`` None: the installed virtual lab for ``config``).
+    by hand, with the flight's parameters (``lab`` None: the installed virtual lab for
+    the configuration they were assembled from).
 
     :meth:`run` flies to a terminal state; :meth:`step` advances one DATA period
     for tests that interleave their own checks.
     """
 
-    def __init__(self, config: GroundStationConfig, *, lab: Lab | None = None,
+    def __init__(self, params: FlightParams, *, lab: Lab | None = None,
                  controller: Controller | None = None, trajectory: Trajectory | None = None,
                  duration_s: float | None = None,
                  recorder: FlightRecorder | None = None) -> None:
-        self.config = config
-        self.lab: Lab = lab if lab is not None else virtual_lab().in_process(config)
-        self.core = FlightCore(config, controller=controller, trajectory=trajectory,
+        self.params = params
+        self.lab: Lab = lab if lab is not None else virtual_lab().in_process(params.source)
+        self.core = FlightCore(params, controller=controller, trajectory=trajectory,
                                duration_s=duration_s)
-        self._profile = config.serial.crc_profile
+        self._profile = params.link.crc_profile
         self._decoder = StreamDecoder(self._profile)
-        self._front = DataFrontEnd(config)
-        self._poses = PoseFilter.from_config(config.vicon, config.safety)
-        self._period = config.serial.data_period_ms / 1000.0
+        self._front = DataFrontEnd(params.imu)
+        self._poses = PoseFilter.from_params(params.vicon.filter)
+        self._period = params.link.data_period_ms / 1000.0
         self.stop_requests = 0
         self.trace = FlightTrace()
         self.compute_times: list[float] = []
@@ -117,8 +118,8 @@ class InProcessFlight:
         self._ticklog = TickLogger(recorder) if recorder is not None else None
         """With a recorder the flight writes the same log as the daemon (times are the
         lab's simulated seconds; timing columns hold the core's compute time)."""
-        self.lab.write(encode_frame(ConfigMsg(sensor_mask(config.serial.sensors),
-                                              config.serial.data_period_ms), self._profile))
+        self.lab.write(encode_frame(ConfigMsg(params.link.sensor_mask,
+                                              params.link.data_period_ms), self._profile))
 
     @property
     def pose_filter(self) -> PoseFilter:
@@ -205,12 +206,12 @@ class InProcessFlight:
                             self.lab, self.core)
 
 
-def fly_in_process(config: GroundStationConfig, *, lab: Lab | None = None,
+def fly_in_process(params: FlightParams, *, lab: Lab | None = None,
                    controller: Controller | None = None, trajectory: Trajectory | None = None,
                    duration_s: float | None = None, max_time_s: float = 300.0,
                    events: Sequence[tuple[float, Event]] = (),
                    recorder: FlightRecorder | None = None) -> FlightResult:
     """Fly one whole flight in-process; see :class:`InProcessFlight`."""
-    flight = InProcessFlight(config, lab=lab, controller=controller, trajectory=trajectory,
+    flight = InProcessFlight(params, lab=lab, controller=controller, trajectory=trajectory,
                              duration_s=duration_s, recorder=recorder)
     return flight.run(max_time_s=max_time_s, events=events)

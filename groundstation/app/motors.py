@@ -21,7 +21,7 @@ from collections.abc import Callable
 from groundstation.asctec.ll import motor_gesture
 from groundstation.asctec.ll_link import LlLink
 from groundstation.asctec.messages import CommandMsg
-from groundstation.config import GroundStationConfig
+from groundstation.asctec.params import LinkParams
 from groundstation.errors import GroundStationError
 
 STATUS_WAIT_S = 2.0
@@ -30,28 +30,30 @@ STATUS_WAIT_S = 2.0
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
 
-def motor_gesture_command(config: GroundStationConfig, *, start: bool,
+def motor_gesture_command(link_params: LinkParams, *, start: bool,
                           echo: Callable[[str], None]) -> int:
-    """Send the start (or stop) gesture; return the exit code (see the module docstring)."""
+    """Send the start (or stop) gesture over the link ``link_params`` describe (the
+    flight's :attr:`~groundstation.flight.params.FlightParams.link`); return the exit
+    code (see the module docstring)."""
     what = "start" if start else "stop"
-    if config.serial.protocol != "asctec-ll":
-        echo(f"error: the {config.serial.protocol} dialect has no motor gesture: the pilot "
+    if link_params.protocol != "asctec-ll":
+        echo(f"error: the {link_params.protocol} dialect has no motor gesture: the pilot "
              "starts and stops the motors (serial.protocol: asctec-ll has one)")
         return EXIT_USAGE
-    ll = config.serial.ll
+    ll = link_params.ll
     try:
-        with LlLink.from_config(config.serial) as link:
+        with LlLink.from_params(link_params) as link:
             link.start_stream()
             before = link.wait_status(STATUS_WAIT_S)
             if before is None:
-                echo(f"refused: no LL_STATUS from the vehicle on {config.serial.port} within "
+                echo(f"refused: no LL_STATUS from the vehicle on {link_params.port} within "
                      f"{STATUS_WAIT_S:g} s; nothing sent")
                 return EXIT_FAILED
             if before.flying:
                 echo("refused: the vehicle reports that it is flying; nothing sent")
                 return EXIT_FAILED
             gesture = motor_gesture(start, ll.motor_start_yaw)
-            period = 1.0 / config.serial.command_rate_hz
+            period = 1.0 / link_params.command_rate_hz
             end = time.monotonic() + ll.motor_gesture_s
             while time.monotonic() < end:
                 link.send(gesture)

@@ -89,7 +89,7 @@ def fifo_priority(priority: int | None, *, who: str = "flight loop") -> Iterator
     Yields True while the policy is held. A thread under the normal policy shares the
     cores with every busy process: with two pure-Python spinners on the 2-core VM the
     vehicle saw COMMAND gaps of 55-114 ms, three times past its 100 ms watchdog, in 30
-    flights (issue 14), and a plain process sleeping 1 ms at a time woke up 100 ms late.
+    flights, and a plain process sleeping 1 ms at a time woke up 100 ms late.
     A real-time thread preempts them as soon as it wakes. It needs ``CAP_SYS_NICE`` or
     an ``RLIMIT_RTPRIO`` of at least ``priority`` (systemd ``LimitRTPRIO=``, or
     ``@groundstation - rtprio 20`` in /etc/security/limits.d); without either a warning
@@ -161,7 +161,7 @@ class CollectorPacer:
     interpreter starts one at whatever allocation, in whatever thread, finds enough
     objects promoted to the oldest generation, and while it runs no thread runs: in
     the hostile tester's flights the COMMAND gap reached 122 ms and the vehicle's
-    100 ms watchdog expired in the air (issue 14). While active (``with``):
+    100 ms watchdog expired in the air. While active (``with``):
 
     * entering: one full collection (on the ground, before the loop), then
       ``gc.freeze()``: every object alive now moves to the permanent generation, which

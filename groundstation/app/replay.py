@@ -26,8 +26,8 @@ import yaml
 from groundstation.app.recorder import read_flight
 from groundstation.config import GroundStationConfig, validate_config
 from groundstation.control.sticks import StickParams, to_sticks
+from groundstation.flight.assembly import assemble
 from groundstation.flight.core import FlightCore
-from groundstation.flight.inputs import quadrotor_params
 from groundstation.flight.supervisor import State
 from groundstation.model import inputs_from_sticks
 from groundstation.model.quaternion import conjugate, multiply
@@ -103,10 +103,11 @@ def _angle(q_a: np.ndarray, q_b: np.ndarray) -> float:
 def replay_flight(log: str, config: GroundStationConfig | None = None) -> ReplayReport:
     """Replay the flight log in ``log`` (a flight directory) with ``config`` (default: the
     configuration the flight used). Raises RecorderError for an unreadable log."""
-    rows, _meta, config_text = read_flight(log)
-    cfg = config if config is not None else validate_config(yaml.safe_load(config_text), log)
-    core = FlightCore(cfg)
-    quad = quadrotor_params(cfg)
+    rows, _meta, logged_config = read_flight(log)
+    cfg = config if config is not None else validate_config(yaml.safe_load(logged_config), log)
+    params = assemble(cfg)
+    core = FlightCore(params)
+    quad = params.vehicle
     sticks_params = StickParams.from_quadrotor(quad)
     pos_sq, pos_max, att_max, n_est = 0.0, 0.0, 0.0, 0
     stick_max = np.zeros(4, dtype=int)

@@ -41,7 +41,7 @@ class ConfigModel(BaseModel):
     """Base: unknown keys are errors, instances are immutable, numbers are numbers.
 
     Every number must be finite (``allow_inf_nan=False``: ``.inf`` is no time, rate or
-    length), and numbers and booleans are strict, each in every model (issue 14): no
+    length), and numbers and booleans are strict, each in every model: no
     ``true`` for a number (``vicon.port: true`` would be port 1), no ``1e30`` for an
     integer (``serial.baud``), no string for a number, no ``0``/``1`` for a boolean. An
     int is a float. The rest stays lax, as YAML needs it: a string is a path, a list a

@@ -41,7 +41,7 @@ class LqrConfig(ConfigModel):
         0.0, 100.0, "s: an observer slower than 100 s (five 20 s laps) removes nothing "
         "within a flight", lo_open=True)] | None = 1.0
     # constant-disturbance observer time constant; beyond the thesis: zero steady-state
-    # error under thrust error, droop, wrong mass or accelerometer bias (issue 7)
+    # error under thrust error, droop, wrong mass or accelerometer bias
     velocity_source: Literal["reference", "samples"] = "reference"
     # constant-velocity model: the trajectory's own velocity, or filtered sample
     # differences as the thesis did (eq. 9.22-9.26)
@@ -89,12 +89,13 @@ class HinfConfig(ConfigModel):
     integral_scale: IntegralWeights4 | None = Field(
         default_factory=lambda: [0.3, 0.3, 1.0, 0.1])
     # weights of the integrated [x, y, z, q3] errors (beyond the thesis: zero steady-state
-    # error under a thrust-map error, issue 13); null: the thesis's design, no integrators
+    # error under a thrust-map error); null: the thesis's design, no integrators
     robust_range: Annotated[float, within(
         0.0, 1.0, "a fraction: at 1 a rate gain or the thrust could be zero",
         hi_open=True)] = 0.3
     # design for rate gains, rate-loop time constant and thrust per newton within +- this
-    # fraction (issue 13: 30 %); 0 = the nominal plant only, as the thesis
+    # fraction (30 %: the spread `gs eval --perturb` draws); 0 = the nominal plant only,
+    # as the thesis
     pole_radius_rad_s: LoopRate | None = 12.0
     # keep the closed-loop poles in this disc: no loop faster than the 50 Hz, ~40 ms
     # delayed command link carries; null = unconstrained, as the thesis
@@ -167,7 +168,7 @@ class LqrFfConfig(ConfigModel):
     # R on [omega_x, omega_y, omega_z, F_z] [1/(rad/s)^2, 1/N^2], tuned with q_error
     q_integral: IntegralWeights4 = Field(default_factory=lambda: [20.0, 20.0, 60.0, 2.0])
     # weights on the integrated [x, y, z, q3] errors: zero steady-state error under a
-    # thrust-map error, a wrong mass or battery droop (issue 13); 0 turns one off. z is
+    # thrust-map error, a wrong mass or battery droop; 0 turns one off. z is
     # weighted 3x: with mass and thrust map 15 % off, 20 left a 2 cm take-off tail in TRACK
     integral_limit: IntegralLimit = 2.0  # anti-windup clamp on each integrated error [m s]
     external_force: ExternalForceConfig = ExternalForceConfig()

@@ -17,7 +17,7 @@ from groundstation.config.ranges import (
     TurnDeg,
     within,
 )
-from groundstation.types import CHANNELS, Channel, SensorBlockName
+from groundstation.types import CHANNELS, Channel, Dialect, SensorBlockName
 
 
 def _default_sensors() -> list[SensorBlockName]:
@@ -79,7 +79,7 @@ class SerialConfig(ConfigModel):
     """The serial link to the vehicle (X-3D dialect ``docs/protocol.md`` or the
     AscTec LL dialect; docs/protocol.md)."""
 
-    protocol: Literal["x3d", "asctec-ll"] = "x3d"
+    protocol: Dialect = "x3d"
     # the vehicle's dialect: configured, never guessed from the bytes (the dialects share
     # descriptor 0x01 for different packets)
     port: str = "/dev/ttyUSB0"  # the lab's XBee adapter; a pty path or pyserial URL also works
@@ -180,7 +180,7 @@ class ViconConfig(ConfigModel):
     plausibility_margin_m: Annotated[float, within(
         0.0, LAB_EXTENT_M, "a margin beyond LAB_EXTENT_M accepts any pose [m]")] = 0.5
     # [m] a pose further than this outside safety.volume_x/y/z is refused as impossible
-    # (issue 14). The supervisor lands at the volume's edge; braking from the fastest
+    #. The supervisor lands at the volume's edge; braking from the fastest
     # reference (safety.max_speed_m_s, 1.5 m/s) at the 35 deg tilt limit takes 0.16 m,
     # and the cameras see a little beyond the volume (Table B.1): 0.5 m covers both
     reanchor_poses: Annotated[int, within(

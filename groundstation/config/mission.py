@@ -141,7 +141,7 @@ class SafetyConfig(ConfigModel):
         0.0, 10.0, "s: a signal 10 s after the first is a new request, never the same one")] = 0.5
     # a second SIGINT/SIGTERM hands back at once only this long after the first [s];
     # closer ones are the same request: GNU `timeout` signals the process and then its
-    # group within ~1 ms (issue 14), and a person pressing Ctrl-C twice on purpose takes
+    # group within ~1 ms, and a person pressing Ctrl-C twice on purpose takes
     # longer than half a second
     battery_land_v: Annotated[float, within(
         0.0, 65.535, "V: the X-3D's STATUS carries the voltage as uint16 mV (spec section "

@@ -90,7 +90,7 @@ class RealtimeConfig(ConfigModel):
     fifo_priority: FifoPriority | None = 10
     # SCHED_FIFO priority of the flight loop and its threads while flying (needs
     # CAP_SYS_NICE or LimitRTPRIO; without, a warning and the normal policy). Under two
-    # busy processes the normal policy let COMMAND gaps reach 114 ms (issue 14); null
+    # busy processes the normal policy let COMMAND gaps reach 114 ms; null
     # asks for nothing
     switch_interval_ms: Annotated[float, within(
         0.0, 5.0, "ms: the longest a reader thread may delay a 10 ms tick; Python's own "
@@ -100,7 +100,7 @@ class RealtimeConfig(ConfigModel):
     # freeze the start-up objects and run full garbage collections only right after a
     # COMMAND went out (realtime.CollectorPacer): the interpreter's own full collection
     # walked all ~93,000 objects in ~64 ms and the vehicle's 100 ms watchdog expired in
-    # the air (issue 14). false: the interpreter's own collector
+    # the air. false: the interpreter's own collector
 
 
 class ApiConfig(ConfigModel):

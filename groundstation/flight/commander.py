@@ -474,6 +474,18 @@ def plan_follow(base: PlanBase, trajectory: Trajectory, duration: float,
 
 
 # --------------------------------------------------------------------------- the loop's side
+@dataclass(frozen=True, slots=True)
+class CommanderParams:
+    """The commanded flight (``trajectory.name: none``): the ``home`` it takes off to and
+    holds at, NED [m], its heading ``yaw`` [rad] (None: the heading at take-off),
+    ``arrival_tolerance_m`` [m] and ``idle_land_s`` [s] (see :class:`Commander`)."""
+
+    home: tuple[float, float, float]
+    yaw: float | None
+    arrival_tolerance_m: float
+    idle_land_s: float
+
+
 class Commander:
     """The commanded trajectory and the book of motions (loop thread only).
 
@@ -486,6 +498,13 @@ class Commander:
     name = "none"
     duration = math.inf
     periodic = False
+
+    @classmethod
+    def from_params(cls, params: CommanderParams) -> Commander:
+        """The commander ``params`` describe, holding at its home."""
+        return cls(np.asarray(params.home, dtype=float), params.yaw,
+                   arrival_tolerance_m=params.arrival_tolerance_m,
+                   idle_land_s=params.idle_land_s)
 
     def __init__(self, home: FloatArray, yaw: float | None, *, arrival_tolerance_m: float,
                  idle_land_s: float) -> None:

@@ -38,23 +38,20 @@ import numpy as np
 
 from groundstation.asctec.channels import ChannelHandover
 from groundstation.asctec.messages import ALL_CHANNELS_MASK, CommandMsg
-from groundstation.config import GroundStationConfig
 from groundstation.control.base import Controller, heading_of
 from groundstation.control.envelope import ReferenceEnvelope
+from groundstation.control.factory import make_controller
 from groundstation.control.sticks import StickParams, to_sticks
 from groundstation.control.trajectory import Trajectory
 from groundstation.estimation.base import Estimator
 from groundstation.estimation.ekf import Ekf
-from groundstation.estimation.records import EkfParams, InitReport
-from groundstation.flight.assembly import (
-    controller_from_config,
-    flight_limits_from_config,
-    trajectory_for_flight,
-)
+from groundstation.estimation.records import InitReport
 from groundstation.flight.commander import Commander
-from groundstation.flight.inputs import InputHealth, VehicleStatus, quadrotor_params
+from groundstation.flight.inputs import InputHealth, VehicleStatus
 from groundstation.flight.mission import Mission
-from groundstation.flight.supervisor import Observation, State, Supervisor, SupervisorLimits
+from groundstation.flight.params import FlightParams
+from groundstation.flight.prepare import trajectory_for_flight
+from groundstation.flight.supervisor import Observation, State, Supervisor
 from groundstation.model import inputs_from_sticks
 from groundstation.types import (
     Channel,
@@ -100,69 +97,34 @@ class TickResult:
     vicon_refused: int = 0
 
 
-def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
-    """Supervisor limits from the safety, serial and Vicon sections."""
-    s = config.safety
-    return SupervisorLimits(
-        volume_x=s.volume_x, volume_y=s.volume_y, volume_z=s.volume_z,
-        max_tilt_rad=math.radians(s.max_tilt_deg),
-        handback_tilt_rad=math.radians(s.handback_tilt_deg), vicon_loss_hold_s=s.vicon_loss_hold_s,
-        vicon_loss_land_s=s.vicon_loss_land_s, link_loss_s=s.link_loss_s,
-        preflight_timeout_s=s.preflight_timeout_s, takeoff_timeout_s=s.takeoff_timeout_s,
-        min_data_rate_hz=0.8 * 1000.0 / config.serial.data_period_ms,
-        min_vicon_rate_hz=config.vicon.min_rate_hz, on_signal=s.on_signal,
-        battery_land_v=s.battery_land_v, battery_grace_s=s.battery_grace_s,
-        pilot_grace_s=pilot_grace_s(config), on_geofence=s.on_geofence,
-        on_overruled=s.on_overruled,
-        on_second_stream=s.on_second_stream, landing_confirm_s=s.landing_confirm_s,
-    )
-
-
-def pilot_grace_s(config: GroundStationConfig) -> float:
-    """How long the vehicle may report not applying our commands before it is the pilot's
-    [s]: the supervisor's 0.2 s, or, in the AscTec LL dialect, whose status is polled only
-    every ``serial.ll.status_every`` IMU periods, two of those periods plus a round trip
-    (the first report after a command may be one period old when it is sent)."""
-    grace = SupervisorLimits().pilot_grace_s
-    if config.serial.protocol == "asctec-ll":
-        ll = config.serial.ll
-        status_period = ll.status_every * config.serial.data_period_ms / 1000.0
-        grace = max(grace, 2.0 * status_period + ll.answer_timeout_ms / 1000.0)
-    return grace
-
-
 class FlightCore:
     """Estimator, supervisor, mission, controller and handover for one flight.
 
-    config : the validated configuration
-    controller, trajectory, estimator : replace the ones the configuration names
+    params : the flight's parameters (:func:`groundstation.flight.assembly.assemble`)
+    controller, trajectory, estimator : replace the ones the parameters name
         (tests and the evaluation inject their own)
     duration_s : trajectory time flown before landing (default: see
-        :func:`~groundstation.flight.assembly.trajectory_for_flight`, which also shapes
+        :func:`~groundstation.flight.prepare.trajectory_for_flight`, which also shapes
         and checks the trajectory: TrajectoryError if it cannot be flown)
     """
 
-    def __init__(self, config: GroundStationConfig, *, controller: Controller | None = None,
+    def __init__(self, params: FlightParams, *, controller: Controller | None = None,
                  trajectory: Trajectory | None = None, estimator: Estimator | None = None,
                  duration_s: float | None = None) -> None:
-        self.config = config
-        quad = quadrotor_params(config)
-        self.ekf: Estimator = estimator or Ekf(EkfParams.from_config(
-            config.vehicle, config.estimator, config.vicon, config.safety, config.serial))
-        self.controller = controller or controller_from_config(config)
-        # built from the configuration unless given, shaped, and refused (TrajectoryError)
+        self.params = params
+        quad = params.vehicle
+        self.ekf: Estimator = estimator or Ekf(params.ekf)
+        self.controller = controller or make_controller(params.controller, quad,
+                                                        params.command_period_s)
+        # built from the parameters unless given, shaped, and refused (TrajectoryError)
         # unless it is feasible and inside the volume
-        self.trajectory, duration = trajectory_for_flight(config, trajectory, duration_s)
-        self.mission = Mission(self.trajectory, duration,
-                               climb_speed=config.safety.takeoff_speed_m_s,
-                               land_speed=config.safety.land_speed_m_s,
-                               spool_s=config.serial.handover_blend_s,
-                               max_yaw_rate=math.radians(config.safety.max_yaw_rate_deg_s))
+        self.trajectory, duration = trajectory_for_flight(params, trajectory, duration_s)
+        self.mission = Mission.from_params(self.trajectory, duration, params.mission)
         self.commander = self.trajectory if isinstance(self.trajectory, Commander) else None
         """The run-time commands' trajectory (``trajectory.name: none``), else None."""
-        self.supervisor = Supervisor(limits_from_config(config))
-        self.handover = ChannelHandover(blend_time=config.serial.handover_blend_s)
-        self._auto = tuple(config.channels.auto)
+        self.supervisor = Supervisor(params.supervisor)
+        self.handover = ChannelHandover(blend_time=params.handover_blend_s)
+        self._auto = params.channels
         self._quad = quad
         self._stick_params = StickParams.from_quadrotor(quad)
         self._sticks: Sticks | None = None  # the controller's sticks of the last COMMAND
@@ -171,20 +133,20 @@ class FlightCore:
         self._automatic = False
         self._weight = quad.mass * quad.g  # [N]
         self._lift_fraction = 1.0  # last commanded lift / weight, for the landing check
-        self._command_period = 1.0 / config.serial.command_rate_hz
+        self._command_period = params.command_period_s
         self._next_command = -math.inf
         self._was_commanding = False
         self._imu_buffer: deque[ImuSample] = deque(maxlen=INIT_IMU_SAMPLES)
         self._t_init: float | None = None
         self.init_report: InitReport | None = None
-        self._settle_s = config.estimator.settle_time_s
+        self._settle_s = params.settle_time_s
         self._last_pose: Pose | None = None
         self._held: ImuSample | None = None
         self._estimate: StateEstimate | None = None
         self._judged = self._refused = 0  # the estimator's pose counts at the last tick
         self._overruled = 0  # the estimator's re-anchorings on unexplained poses, so far
         self._land_request = ""
-        self._envelope = ReferenceEnvelope.from_limits(flight_limits_from_config(config))
+        self._envelope = ReferenceEnvelope.from_limits(params.limits)
         self._reference_fault = ""  # found on the last tick's reference, for this one
 
     # ------------------------------------------------------------------ public
@@ -393,7 +355,7 @@ class FlightCore:
     def _vicon_age(self, health: InputHealth) -> float:
         """Time since the last pose the pose filter passed or, once the estimator runs,
         since the last one it fused, whichever is longer [s]: poses the estimator refuses
-        (a sender it cannot believe) are no Vicon to the failsafes (issue 14)."""
+        (a sender it cannot believe) are no Vicon to the failsafes."""
         if self.init_report is None:
             return health.vicon_age_s
         return max(health.vicon_age_s, self.ekf.time_since_fix)

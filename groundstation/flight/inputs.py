@@ -13,13 +13,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from groundstation.asctec.blocks import DATA_SIZE_BY_MASK, sensor_mask
-from groundstation.asctec.decoder import FRAME_OVERHEAD
-from groundstation.asctec.ll import COMMAND_SIZE, ImuRawData
-from groundstation.asctec.messages import CommandMsg, DataMsg
-from groundstation.config import GroundStationConfig
-from groundstation.model.quadrotor import QuadrotorParams
-from groundstation.model.sensors import AxisScaling, ImuScaling
+from groundstation.asctec.messages import DataMsg
+from groundstation.model.sensors import ImuScaling
 from groundstation.types import ImuSample, Sticks
 from groundstation.vicon.health import RateMonitor, ViconEvidence
 
@@ -76,52 +71,17 @@ def with_vicon(health: InputHealth, evidence: ViconEvidence,
                    vicon_rivals=evidence.rivals, vicon_diagnosis=diagnosis)
 
 
-def _vec3(values: list[float]) -> tuple[float, float, float]:
-    return (float(values[0]), float(values[1]), float(values[2]))
-
-
-def wire_time_s(config: GroundStationConfig) -> float:
-    """Time [s] one DATA frame (of the configured blocks) and one COMMAND frame spend on
-    the serial wire at the configured baud: 10 bits per byte (8N1), frame = N + 11
-    bytes (spec sections 1 and 3); in the AscTec LL dialect an IMU_RAWDATA frame (39
-    bytes) and a 17-byte command."""
-    if config.serial.protocol == "asctec-ll":  # IMU_RAWDATA frame, unframed `>*>di` command
-        data_bytes = max(ImuRawData.PAYLOAD_SIZES) + FRAME_OVERHEAD
-        command_bytes = COMMAND_SIZE
-    else:
-        data_bytes = DATA_SIZE_BY_MASK[sensor_mask(config.serial.sensors)] + FRAME_OVERHEAD
-        command_bytes = max(CommandMsg.PAYLOAD_SIZES) + FRAME_OVERHEAD
-    return 10.0 * (data_bytes + command_bytes) / config.serial.baud
-
-
-def quadrotor_params(config: GroundStationConfig) -> QuadrotorParams:
-    """Model parameters from the vehicle section; the input delay is the command
-    delay plus the frames' time on the wire (:func:`wire_time_s`)."""
-    v = config.vehicle
-    a3, a2, a1, a0 = v.thrust_poly
-    return QuadrotorParams(mass=v.mass_kg, g=v.gravity, k_rate=_vec3(v.k_rate),
-                           inflow=v.induced_inflow, thrust_poly=(a3, a2, a1, a0),
-                           rate_tau=v.rate_loop_tau_s,
-                           input_delay=v.command_delay_s + wire_time_s(config))
-
-
-def imu_scaling(config: GroundStationConfig) -> ImuScaling:
-    """Per-axis scale and zero offset of the gyro and accelerometer (Table 6.2)."""
-    v = config.vehicle
-    return ImuScaling(gyro=AxisScaling(_vec3(v.gyro_scale), _vec3(v.gyro_zero)),
-                      acc=AxisScaling(_vec3(v.acc_scale), _vec3(v.acc_zero)))
-
-
 class DataFrontEnd:
-    """Turns each received DATA message into an IMU sample and the vehicle's status.
+    """Turns each received DATA message into an IMU sample (scaled as ``imu`` says: the
+    flight's :attr:`~groundstation.flight.params.FlightParams.imu`) and the vehicle's status.
 
     A frame without GYRO and ACC yields no IMU sample; without STATUS the X-3D is
     assumed to apply our commands and without RC the switch is assumed on (the
     configuration validator insists on gyro and acc; status and rc are advised).
     """
 
-    def __init__(self, config: GroundStationConfig, rate_window_s: float = 1.0) -> None:
-        self._scaling = imu_scaling(config)
+    def __init__(self, imu: ImuScaling, rate_window_s: float = 1.0) -> None:
+        self._scaling = imu
         self._rate = RateMonitor(window_s=rate_window_s, min_rate_hz=0.0, max_rate_hz=math.inf)
         self._t_last = -math.inf
         self._gyro = np.zeros(3)

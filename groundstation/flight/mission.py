@@ -66,6 +66,18 @@ MOVE_JERK_M_S3 = 2.0
 at j / g, here 0.2 rad/s, far inside the rate limits whatever the move's length."""
 
 
+@dataclasses.dataclass(frozen=True, slots=True)
+class MissionParams:
+    """How the mission flies the phases around the trajectory: ``climb_speed`` and
+    ``land_speed`` [m/s], ``spool_s`` on the ground at the start of take-off [s] (the
+    handover blend), ``max_yaw_rate`` of the take-off's heading turn [rad/s]."""
+
+    climb_speed: float
+    land_speed: float
+    spool_s: float
+    max_yaw_rate: float
+
+
 class Mission:
     """Reference generator across take-off, tracking, hold and landing.
 
@@ -105,6 +117,14 @@ class Mission:
         self._rest_point = np.zeros(3)
         self._track_clock = 0.0
         self._last_t: float | None = None
+
+    @classmethod
+    def from_params(cls, trajectory: Trajectory, duration_s: float,
+                    params: MissionParams) -> Mission:
+        """A mission flying ``trajectory`` for ``duration_s`` [s] as ``params`` describe."""
+        return cls(trajectory, duration_s, climb_speed=params.climb_speed,
+                   land_speed=params.land_speed, spool_s=params.spool_s,
+                   max_yaw_rate=params.max_yaw_rate)
 
     @property
     def ground(self) -> FloatArray:

@@ -9,7 +9,8 @@ the planner's live objects (the hostile tester's 12 s plan made 28 full collecti
 up to 38 ms and the vehicle's watchdog expire). This module holds what both sides share:
 
 * :class:`PlannerSettings`, the plain record a planner plans with (the flight limits and
-  volume, the shaping), built once from the configuration;
+  volume, the shaping), built once with the flight's parameters
+  (:mod:`groundstation.flight.assembly`);
 * the jobs, small picklable records a planner runs: :class:`PrepareFollow` (build, bound,
   shape and check a trajectory to follow; the expensive part, before the loop is asked
   for a :class:`~groundstation.flight.commander.PlanBase`) and :class:`PlanMotion` (plan
@@ -32,13 +33,15 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
-from groundstation.config import GroundStationConfig, TrajectoryConfig
 from groundstation.control.feasibility import check_feasibility
 from groundstation.control.shaping import shape_for_flight
-from groundstation.control.trajectories import trajectory_from_config, waypoints_from_rows
+from groundstation.control.trajectories import (
+    TrajectorySpec,
+    build_trajectory,
+    waypoints_from_rows,
+)
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import TrajectoryError
-from groundstation.flight.assembly import motion_limits_from_config
 from groundstation.flight.commander import (
     MAX_MOTION_S,
     CommandRefusedError,
@@ -63,12 +66,6 @@ class PlannerSettings:
     limits: MotionLimits
     shaping: Literal["min-jerk", "none"]
     corner_smoothing_s: float
-
-
-def settings_from_config(config: GroundStationConfig) -> PlannerSettings:
-    """The settings of ``config``'s flight."""
-    t = config.trajectory
-    return PlannerSettings(motion_limits_from_config(config), t.shaping, t.corner_smoothing_s)
 
 
 class PlanJob(Protocol):
@@ -126,7 +123,8 @@ def _refuse_long(what: str, seconds: float, start_in: float) -> None:
 class PrepareFollow:
     """Build the trajectory of a ``follow`` request, bound it, shape it and check it.
 
-    section : a validated ``trajectory:`` section (None for waypoints); rows : waypoints
+    spec : the trajectory of a validated ``trajectory:`` section (None for waypoints;
+        :func:`groundstation.flight.assembly.trajectory_spec`); rows : waypoints
     ``[t, x, y, z(, yaw)]`` (s, NED m, rad), already checked at the boundary (None for a
     section); duration : how long to fly it [s] (None: one lap of a periodic trajectory,
     the longer of the trajectory and its ``period_s`` for the other named ones, the
@@ -134,7 +132,7 @@ class PrepareFollow:
     (0 without one). Result: a :class:`Followable`.
     """
 
-    section: TrajectoryConfig | None
+    spec: TrajectorySpec | None
     rows: list[list[float]] | None
     duration: float | None
     start_in: float = 0.0
@@ -145,10 +143,10 @@ class PrepareFollow:
         for a trajectory the check refuses; ``request`` for unusable waypoints."""
         lim = settings.limits
         try:
-            if self.section is not None:
-                traj = trajectory_from_config(self.section)
+            if self.spec is not None:
+                traj = build_trajectory(self.spec)
                 lap = traj.duration if traj.periodic and traj.duration > 0.0 \
-                    else max(traj.duration, self.section.period_s)
+                    else max(traj.duration, self.spec.period_s)
                 what = "one lap" if traj.periodic else "the trajectory"
             else:
                 assert self.rows is not None

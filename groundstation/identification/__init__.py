@@ -1,4 +1,4 @@
-"""System identification from flight logs (issue 17): the rate loop and the IMU scales.
+"""System identification from flight logs: the rate loop and the IMU scales.
 
 * :func:`identify_rates` fits each body axis's stick-to-rate gain, transport delay and
   rate-loop time constant (thesis eq. 3.22, Ch. 3.3.1, Fig. 3.8) to the recorded

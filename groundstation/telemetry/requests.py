@@ -17,7 +17,7 @@ Wire format, one JSON object per message (UTF-8, one frame, at most
   fault of ours, logged), or the handler's own (:mod:`groundstation.app.api`: state,
   volume, infeasible, busy).
 
-Nothing a client sends may crash, stall or wedge the flight loop (issue 14):
+Nothing a client sends may crash, stall or wedge the flight loop:
 
 * The daemon answers requests in a thread of its own (:meth:`RequestServer.serve`);
   a request that needs the flight is handed to the loop, which runs it between two
@@ -45,12 +45,12 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import structlog
 import zmq
 
-from groundstation.config import TelemetryConfig
 from groundstation.endpoints import local_endpoint
 from groundstation.errors import TelemetryError
 from groundstation.telemetry._zmqowner import ZmqOwner
@@ -112,6 +112,17 @@ class RequestStats:
     """Times a failed socket was bound again."""
 
 
+@dataclass(frozen=True, slots=True)
+class RequestServerParams:
+    """The request socket: the ZeroMQ ``endpoint`` it binds (None: no requests), and the
+    CURVE ``server_key`` (a ``.key_secret`` file) and ``client_keys`` (a directory of
+    ``*.key`` files) that authenticate clients (both None: loopback only)."""
+
+    endpoint: str | None
+    server_key: Path | None
+    client_keys: Path | None
+
+
 class RequestServer(ZmqOwner):
     """The daemon's end: a bound REP socket answered from the flight loop.
 
@@ -154,16 +165,16 @@ class RequestServer(ZmqOwner):
         self.endpoint = self._bind_socket(zmq.REP, endpoint, "control", self._options)
 
     @classmethod
-    def from_config(cls, config: TelemetryConfig,
+    def from_params(cls, params: RequestServerParams,
                     context: zmq.Context[Any] | None = None) -> RequestServer:
-        """A server on ``telemetry.control_endpoint`` (disabled when it is null), with CURVE
-        when ``telemetry.control_server_key`` is set. TelemetryError for unusable keys."""
+        """A server as ``params`` describe it (disabled without an endpoint), with CURVE
+        when a server key is given. TelemetryError for unusable keys."""
         curve = None
-        if config.control_endpoint is not None and config.control_server_key is not None:
-            if config.control_client_keys is None:  # the configuration's validator pairs them
+        if params.endpoint is not None and params.server_key is not None:
+            if params.client_keys is None:  # the configuration's validator pairs them
                 raise TelemetryError("control: telemetry.control_client_keys is not set")
-            curve = load_server_keys(config.control_server_key, config.control_client_keys)
-        return cls(config.control_endpoint, context=context, curve=curve)
+            curve = load_server_keys(params.server_key, params.client_keys)
+        return cls(params.endpoint, context=context, curve=curve)
 
     def _start_authentication(self, curve: CurveServer) -> None:
         from zmq.auth.thread import ThreadAuthenticator

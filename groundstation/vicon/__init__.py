@@ -29,8 +29,8 @@ from groundstation.vicon.frames import (
     vicon_to_ned,
 )
 from groundstation.vicon.health import RateMonitor, ViconEvidence, ViconHealth
-from groundstation.vicon.posefilter import FilterOptions, PoseFilter, filter_options
-from groundstation.vicon.receiver import DEFAULT_PORT, ViconReceiver
+from groundstation.vicon.posefilter import FilterOptions, PoseFilter, PoseFilterParams
+from groundstation.vicon.receiver import DEFAULT_PORT, ViconParams, ViconReceiver
 
 __all__ = [
     "DEFAULT_BODY_TO_OBJECT",
@@ -42,14 +42,15 @@ __all__ = [
     "FrameConversion",
     "ObjectPose",
     "PoseFilter",
+    "PoseFilterParams",
     "RateMonitor",
     "ViconEvidence",
     "ViconFrame",
     "ViconHealth",
+    "ViconParams",
     "ViconReceiver",
     "decode_datagram",
     "encode_datagram",
-    "filter_options",
     "ned_to_vicon",
     "vicon_to_ned",
 ]

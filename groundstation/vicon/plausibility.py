@@ -1,6 +1,6 @@
 """Absolute plausibility of one Vicon object item: could Tracker have seen it there?
 
-Every pose of the tracked object passes this before anything else (issue 14), at
+Every pose of the tracked object passes this before anything else, at
 start-up and after a gap too, and before any arithmetic that could overflow:
 
 1. **Raw values** (Vicon's mm and radians, already known to be finite): every

@@ -22,8 +22,9 @@ import socket
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from types import TracebackType
-from typing import TYPE_CHECKING, Unpack
+from typing import Unpack
 
 import numpy.typing as npt
 import structlog
@@ -33,16 +34,22 @@ from groundstation.types import Pose
 from groundstation.vicon.frames import (
     DEFAULT_BODY_TO_OBJECT,
     DEFAULT_WORLD_TO_NED,
-    rotation_from_euler_deg,
 )
 from groundstation.vicon.health import ViconEvidence, ViconHealth
-from groundstation.vicon.posefilter import FilterOptions, PoseFilter, filter_options
-
-if TYPE_CHECKING:  # config is only needed by from_config; no import cycle at run time
-    from groundstation.config import SafetyConfig, ViconConfig
+from groundstation.vicon.posefilter import FilterOptions, PoseFilter, PoseFilterParams
 
 DEFAULT_PORT = 51001
 MAX_DATAGRAM = 65536
+
+
+@dataclass(frozen=True, slots=True)
+class ViconParams:
+    """The Vicon stream: the UDP ``bind_address`` and ``port`` it arrives on, and the
+    pose ``filter`` every datagram goes through."""
+
+    bind_address: str
+    port: int
+    filter: PoseFilterParams
 
 
 class ViconReceiver:
@@ -104,27 +111,17 @@ class ViconReceiver:
         self._closed = False
 
     @classmethod
-    def from_config(
+    def from_params(
         cls,
-        config: ViconConfig,
-        safety: SafetyConfig,
+        params: ViconParams,
         *,
         clock: Callable[[], float] = time.monotonic,
         logger: structlog.typing.FilteringBoundLogger | None = None,
     ) -> ViconReceiver:
-        """Build (not start) a client from the ``vicon:`` configuration section, with the
-        flight volume of the ``safety:`` section (poses outside it are never passed on)."""
-        return cls(
-            config.bind_address,
-            config.port,
-            config.object_name,
-            rotation_from_euler_deg(config.world_to_ned.euler_xyz_deg),
-            rotation_from_euler_deg(config.body_to_object.euler_xyz_deg),
-            config.latency_s,
-            clock=clock,
-            logger=logger,
-            **filter_options(config, safety),
-        )
+        """Build (not start) a receiver as ``params`` describe it."""
+        f = params.filter
+        return cls(params.bind_address, params.port, f.object_name, f.world_to_ned,
+                   f.body_to_object, f.latency_s, clock=clock, logger=logger, **f.options())
 
     # -- lifecycle -------------------------------------------------------------
 

@@ -66,9 +66,10 @@ import numpy as np
 
 from groundstation.config import GroundStationConfig, apply_overrides
 from groundstation.control.hinf import default_gain_path
-from groundstation.control.trajectories import trajectory_from_config
+from groundstation.control.trajectories import build_trajectory
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import ConfigError
+from groundstation.flight.assembly import trajectory_spec
 from groundstation.types import FloatArray
 
 STEP_TIME_S = 3.0
@@ -384,7 +385,7 @@ def scenario_config(scenario: Scenario, base: GroundStationConfig) -> GroundStat
 def scenario_trajectory(scenario: Scenario, config: GroundStationConfig) -> Trajectory:
     """The scenario's trajectory (steps at :data:`STEP_TIME_S`)."""
     extra = {"step_time_s": STEP_TIME_S} if scenario.is_step else {}
-    return trajectory_from_config(config.trajectory, **extra)
+    return build_trajectory(trajectory_spec(config.trajectory), **extra)
 
 
 def step_of(trajectory: Trajectory) -> tuple[float, FloatArray, FloatArray]:

@@ -1,4 +1,5 @@
-"""The `gs` command line.
+"""The `gs` commands (their options: :mod:`groundstation.cli.options`; the run-time API's:
+:mod:`groundstation.cli.api`).
 
 Each command is a thin shell: parse options, load the configuration, call the
 package. :func:`main` (the console entry point) is the one error boundary around
@@ -9,7 +10,7 @@ used; `gs fly` adds 3 (could not start), 4 (stopped on request) and 5 (flight lo
 incomplete), see its help;
 130 Ctrl-C; 141 the reader of the output went away (``gs export LOG | head``).
 
-Option names mean one thing across the commands (:mod:`groundstation.cli_options`), and
+Option names mean one thing across the commands (:mod:`groundstation.cli.options`), and
 help is plain text (no rich markup: it would eat ``[hinf]`` and ``[m]``); help texts use
 single backquotes, never reST's double ones.
 """
@@ -20,13 +21,12 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Annotated, Any, Literal, NoReturn, get_args
+from typing import TYPE_CHECKING, Annotated, Any, Literal, NoReturn, get_args
 
 import typer
 
 from groundstation import __version__
-from groundstation.cli_api import register as register_api_commands
-from groundstation.cli_options import (
+from groundstation.cli.options import (
     REPLY_TIMEOUT_S,
     TRAJECTORY_CHOICES,
     TRAJECTORY_HELP,
@@ -42,8 +42,8 @@ from groundstation.cli_options import (
     aliased,
     fail,
 )
-from groundstation.cli_options import ConfigOption as ConfigOption
-from groundstation.cli_options import ProtocolOption as ProtocolOption
+from groundstation.cli.options import ConfigOption as ConfigOption
+from groundstation.cli.options import ProtocolOption as ProtocolOption
 from groundstation.client import DEFAULT_CONTROL, DEFAULT_TELEMETRY
 from groundstation.config import (
     GroundStationConfig,
@@ -61,6 +61,9 @@ from groundstation.errors import (
 )
 from groundstation.logs import configure_logging
 from groundstation.types import Channel as ChannelName
+
+if TYPE_CHECKING:
+    from groundstation.flight.params import FlightParams
 
 # plain help (rich_markup_mode None): rich markup would eat "[hinf]", "[m]" and "[deg]"
 app = typer.Typer(
@@ -82,7 +85,7 @@ app.add_typer(calibrate_app, name="calibrate")
 
 _fail = fail
 """``raise _fail(message, code)``: ``error: message`` on stderr, exit ``code``
-(:func:`groundstation.cli_options.fail`)."""
+(:func:`groundstation.cli.options.fail`)."""
 
 
 def _checked_config(path: Path, overrides: dict[str, Any] | None = None) -> GroundStationConfig:
@@ -133,6 +136,7 @@ def check_config(
     (estimator, controller, the trajectory shaped and checked against the limits and
     the volume).
     """
+    from groundstation.flight.assembly import assemble
     from groundstation.flight.core import FlightCore
 
     if file is not None and config is not None and file != config:
@@ -144,8 +148,9 @@ def check_config(
     configure_logging("warning")  # the verdict says what the flight's info lines would
     try:
         cfg = _checked_config(path)
-        FlightCore(cfg)
-        lines = _trajectory_check(cfg)[0] if cfg.trajectory.name != "none" else []
+        params = assemble(cfg)
+        FlightCore(params)
+        lines = _trajectory_check(params)[0] if not params.commanded else []
     except (GroundStationError, ValueError, ArithmeticError) as exc:
         lines = [line for line in str(exc).splitlines() if line.strip()]
         # a ConfigError: one line per problem; a refused trajectory: a title, then one
@@ -184,20 +189,15 @@ def _trajectory_overrides(target: str) -> dict[str, Any]:
     return {"trajectory.name": target}
 
 
-def _trajectory_check(config: GroundStationConfig) -> tuple[list[str], Any]:
-    """The lines of ``config``'s trajectory check (:mod:`groundstation.control.summary`)
+def _trajectory_check(params: FlightParams) -> tuple[list[str], Any]:
+    """The lines of the flight's trajectory check (:mod:`groundstation.control.summary`)
     and the prepared trajectory; TrajectoryError if it cannot be built."""
     from groundstation.control.summary import check_lines
-    from groundstation.flight.assembly import (
-        flight_limits_from_config,
-        prepare_trajectory,
-        volume_from_config,
-    )
+    from groundstation.flight.prepare import prepare_trajectory
 
-    prepared = prepare_trajectory(config)
+    prepared = prepare_trajectory(params)
     lines = check_lines(prepared.trajectory.name, prepared.description, prepared.duration_s,
-                        prepared.report, flight_limits_from_config(config),
-                        volume_from_config(config))
+                        prepared.report, params.limits, params.volume)
     return lines, prepared
 
 
@@ -219,6 +219,7 @@ def trajectory_command(
     acceleration, jerk, tilt, tilt rate, yaw rate, lift, extent) against the limits, and
     the verdict. Exit 0 if it is flyable, 2 if it is refused or cannot be read."""
     from groundstation.config import validate_config
+    from groundstation.flight.assembly import assemble
 
     if target == "none":
         raise _fail("trajectory none: flown by run-time commands (gs goto ...), each "
@@ -231,18 +232,18 @@ def trajectory_command(
             from groundstation.flight.assembly import check_config
 
             cfg = check_config(cfg, "<defaults>")
-        lines, prepared = _trajectory_check(cfg)
+        params = assemble(cfg)
+        lines, prepared = _trajectory_check(params)
     except (GroundStationError, ValueError, ArithmeticError) as exc:
         raise _fail(str(exc), 2) from exc
     for line in lines:
         typer.echo(line)
     if plot is not None:
         from groundstation.evaluation.trajectory_figure import trajectory_figure
-        from groundstation.flight.assembly import flight_limits_from_config, volume_from_config
 
         try:
             trajectory_figure(prepared.trajectory, prepared.duration_s,
-                              flight_limits_from_config(cfg), volume_from_config(cfg), plot,
+                              params.limits, params.volume, plot,
                               title=f"{target}: top view")
             typer.echo(f"figure: {plot}")
         except GroundStationError as exc:  # matplotlib missing: the check still counts
@@ -299,10 +300,15 @@ def fly(
     overrides.update(_trajectory_overrides(trajectory) if trajectory is not None
                      else {"trajectory.name": None})
     cfg = load(config, overrides)
-    from groundstation.app.fly import AfterFlight, fly_command
+    from groundstation.app.fly import EXIT_USAGE, AfterFlight, fly_command
+    from groundstation.flight.assembly import assemble
 
+    try:
+        params = assemble(cfg)
+    except (GroundStationError, ValueError) as exc:
+        raise _fail(str(exc), EXIT_USAGE) from exc
     after: list[AfterFlight] = []  # once the log is closed and the vehicle the pilot's
-    if cfg.logging.mcap:
+    if params.daemon.mcap:
         from groundstation.export import mcap_after_flight
 
         after.append(mcap_after_flight)
@@ -310,7 +316,7 @@ def fly(
         from groundstation.evaluation.report import report_after_flight
 
         after.append(report_after_flight)
-    raise typer.Exit(fly_command(cfg, duration_s=duration, demo=demo,  # stdout, never blocking
+    raise typer.Exit(fly_command(params, duration_s=duration, demo=demo,  # never blocking
                                  after_flight=after))
 
 
@@ -334,8 +340,10 @@ def motors(
         raise _fail(f"motors: expected start or stop, got {action!r}", 2)
     cfg = load(config, {"serial.port": serial_port, "serial.protocol": protocol})
     from groundstation.app.motors import motor_gesture_command
+    from groundstation.flight.assembly import link_params
 
-    raise typer.Exit(motor_gesture_command(cfg, start=action == "start", echo=typer.echo))
+    raise typer.Exit(motor_gesture_command(link_params(cfg.serial), start=action == "start",
+                                           echo=typer.echo))
 
 
 def _flight_log(path: Path) -> Path:
@@ -798,11 +806,12 @@ def calibrate_imu_command(
     the vehicle moves. Exit 1 if it cannot measure, 2 on a usage error.
     """
     from groundstation.calibration import calibrate_imu
+    from groundstation.flight.assembly import assemble
 
     cfg = load(config, {"serial.port": serial_port, "vicon.port": vicon_port,
                         "vicon.object_name": vicon_object, "serial.protocol": protocol})
     try:
-        result = calibrate_imu(cfg, seconds, use_vicon=vicon)
+        result = calibrate_imu(assemble(cfg), seconds, use_vicon=vicon)
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
     _report_fit(result, "calibrate-imu", aliased(out_dir, out, "--out-dir", "--out", Path(".")),
@@ -823,10 +832,11 @@ def calibrate_vicon_command(
     cannot measure, 2 on a usage error.
     """
     from groundstation.calibration import calibrate_vicon
+    from groundstation.flight.assembly import assemble
 
     cfg = load(config, {"vicon.port": vicon_port, "vicon.object_name": vicon_object})
     try:
-        result = calibrate_vicon(cfg, seconds)
+        result = calibrate_vicon(assemble(cfg), seconds)
     except GroundStationError as exc:
         raise _fail(str(exc), 1) from exc
     _report_fit(result, "calibrate-vicon",
@@ -859,11 +869,12 @@ def link_check_command(
     import json
 
     from groundstation.errors import LinkError
+    from groundstation.flight.assembly import assemble
     from groundstation.linkcheck import run_link_check
 
     cfg = load(config, {"serial.port": serial_port, "serial.protocol": protocol})
     try:
-        report = run_link_check(cfg, seconds, expect_switch=expect_switch == "on")
+        report = run_link_check(assemble(cfg), seconds, expect_switch=expect_switch == "on")
     except LinkError as exc:
         raise _fail(str(exc), 3) from exc
     if as_json:
@@ -922,24 +933,18 @@ def synth_hinf(
     `pip install 'groundstation[hinf]'`.
     """
     from groundstation.control.hinf import synthesise_hinf
-    from groundstation.control.hinf_design import HinfWeights
-    from groundstation.flight.inputs import quadrotor_params
+    from groundstation.flight.assembly import hinf_design, link_params, vehicle_model
 
     cfg = load(config)
-    h = cfg.controller.hinf
-    integral = None if h.integral_scale is None else tuple(h.integral_scale)
-    weights = HinfWeights(eps=h.epsilon, reference_pole=h.reference_pole,
-                          noise_gain=h.noise_gain,
-                          integral_scale=integral)  # type: ignore[arg-type]  # 4 by validation
-    robust = h.robust_range if rate_loop else 0.0
-    if robust > 0.0:
+    design = hinf_design(cfg.controller.hinf, rate_loop)
+    if design.robust_range > 0.0:
         typer.echo(f"robust design for rate gains, rate-loop lag and thrust within "
-                   f"+-{100 * robust:g} %", err=True)
+                   f"+-{100 * design.robust_range:g} %", err=True)
     try:
-        gain = synthesise_hinf(quadrotor_params(cfg), include_rate_loop=rate_loop,
-                               weights=weights, robust_range=robust,
-                               pole_radius=h.pole_radius_rad_s if rate_loop else None,
-                               min_decay=h.min_decay_per_s if rate_loop else None)
+        gain = synthesise_hinf(vehicle_model(cfg.vehicle, link_params(cfg.serial)),
+                               include_rate_loop=design.include_rate_loop,
+                               weights=design.weights, robust_range=design.robust_range,
+                               pole_radius=design.pole_radius, min_decay=design.min_decay)
     except GroundStationError as exc:  # also: cvxpy (the `hinf` extra) not installed
         raise _fail(str(exc), 1) from exc
     gain.save(out)
@@ -1005,7 +1010,7 @@ def _quiet_broken_pipe() -> NoReturn:
     raise SystemExit(EXIT_BROKEN_PIPE)
 
 
-def _add_lab_commands() -> None:
+def add_lab_commands() -> None:
     """Add the installed virtual lab's commands (``gs sim-device``, ``gs eval``; see
     :mod:`groundstation.lab`). Without a lab (the flight image) ``gs`` has none."""
     from groundstation.lab import LabNotInstalledError, virtual_lab
@@ -1017,6 +1022,3 @@ def _add_lab_commands() -> None:
     for name, command in plugin.commands():
         app.command(name)(command)
 
-
-_add_lab_commands()
-register_api_commands(app)  # gs goto, land, hold, status (groundstation/cli_api.py)

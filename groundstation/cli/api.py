@@ -5,7 +5,7 @@ in the project's frames: NED metres (1 m above the floor is ``-1``), headings in
 from north. Exit codes: 0 done; 1 refused (the daemon's reason on stderr), no daemon
 answering, a wait that timed out or ended by a failsafe; 2 a usage error.
 
-Options as everywhere in ``gs`` (:mod:`groundstation.cli_options`): ``--control`` the
+Options as everywhere in ``gs`` (:mod:`groundstation.cli.options`): ``--control`` the
 daemon's request socket (formerly ``--endpoint``), ``--telemetry`` its publisher,
 ``--timeout`` the reply's wait (3 s), ``--wait-timeout`` how long ``--wait`` waits.
 """
@@ -19,7 +19,7 @@ from typing import Annotated, Any
 
 import typer
 
-from groundstation.cli_options import (
+from groundstation.cli.options import (
     REPLY_TIMEOUT_S,
     WAIT_TIMEOUT_S,
     EndpointAlias,
