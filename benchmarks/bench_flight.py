@@ -3,7 +3,7 @@
 Measures, in real-time flights over a real pty and UDP against `gs sim-device` in a
 child process:
 
-* from the **vehicle's side** (issue 14, as an independent lab measures it): for each
+* from the **vehicle's side** (as an independent lab measures it): for each
   COMMAND, the time from the last byte of the DATA frame before it leaving the virtual
   vehicle to the COMMAND arriving (latency p50/p99), and the COMMAND gaps the
   vehicle's 100 ms watchdog sees (the time after each COMMAND with a non-zero mask
@@ -200,7 +200,7 @@ def ms(values: np.ndarray, q: float) -> str:
 
 def report_one(flight: Flight, args: argparse.Namespace, samples: list[tuple[float, float]],
                command_rate: float, data_period_ms: int) -> None:
-    """The single-flight report (issue 8's figures)."""
+    """The single-flight report: the vehicle's figures and the daemon's."""
     summary = flight.summary
     p = summary.percentiles()
     print(f"flight: {summary.final_state.name} ({summary.outcome.name}), {summary.ticks} ticks "

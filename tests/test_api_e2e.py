@@ -1,4 +1,4 @@
-"""Issue 19 end to end: the run-time API through the real processes, as a researcher uses it.
+"""The run-time API end to end, through the real processes, as a researcher uses it.
 
 The virtual vehicle (``gs sim-device``), the daemon (``gs fly --trajectory none``), the
 command line (``gs status``, ``gs goto``, ``gs hold``) and ``examples/fly_square.py`` each

@@ -129,7 +129,7 @@ def test_hinf_findings_in_the_virtual_lab() -> None:
 @pytest.mark.parametrize("controller", ["lqr-ff", "lqr-cv"])
 def test_a_waypoint_file_turning_the_heading_once_around_flies(tmp_path: Path,
                                                                controller: str) -> None:
-    """Issue 13's report: hovering while a waypoint CSV's yaw column turns once around in
+    """A reported failure: hovering while a waypoint CSV's yaw column turns once around in
     20 s, the constant-velocity LQR tilted to 68 degrees near 115 degrees and the
     supervisor landed it. Here on a perturbed vehicle (rate gains 1.3/0.8/1.36, rate loop
     0.083 s, 8 % heavier, 5 % less lift, 30 ms delay), through the EKF at 10 Hz Vicon."""

@@ -1,7 +1,7 @@
 """The CI regression test: the thesis's Ch. 11 flights of `gs eval --fast`, every metric held
 to the figure reached.
 
-The Ch. 11 part of the suite (scenarios.THESIS; issue 13's flights are judged by their
+The Ch. 11 part of the suite (scenarios.THESIS; the shaped flights are judged by their
 targets under --perturb, tests/test_evaluation_targets.py) flies in-process against the
 virtual lab with config/sim.yaml (seed 1, deterministic), each flight once, when the
 first test that reads it asks for it (``FlownSuite``; the report test runs `gs eval` on

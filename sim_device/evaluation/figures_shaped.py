@@ -1,4 +1,5 @@
-"""Issue 13's figures: figure-eight, yaw turn, the square at two headings, take-off at 135.
+"""The shaped flights' figures: figure-eight, yaw turn, the square at two headings, take-off
+at 135 degrees.
 
 Same conventions as :mod:`sim_device.evaluation.figures`: ground truth solid,
 references dotted black, top views NED from above (x north up, y east right), times
@@ -206,7 +207,7 @@ def takeoff(records: Records, out: Path) -> list[Path]:
     return [save(fig, out / "takeoff_h135.png")]
 
 
-def issue13_figures(records: Records, out: Path) -> list[Path]:
-    """Every issue 13 figure whose flights are present."""
+def shaped_figures(records: Records, out: Path) -> list[Path]:
+    """Every figure of the shaped flights whose flights are present."""
     return [*figure_eight(records, out), *yaw_turn(records, out),
             *square_headings(records, out), *takeoff(records, out)]
