@@ -32,7 +32,9 @@ from typing import Annotated, Literal, TypeVar
 
 import typer
 
+from groundstation.config import ControllerType
 from groundstation.control.trajectories import TRAJECTORY_NAMES
+from groundstation.types import Dialect as SerialDialect
 
 T = TypeVar("T")
 
@@ -43,9 +45,9 @@ WAIT_TIMEOUT_S = 60.0
 """``--wait-timeout``: how long ``gs land --wait`` waits, and ``gs goto --wait`` beyond the
 move's planned duration [s]."""
 
-Controller = Literal["lqr-ff", "lqr-cv", "lqr-cp", "pid", "hinf"]
-"""``--controller``: the values of ``controller.type`` (a test checks they agree)."""
-Dialect = Literal["x3d", "asctec-ll"]
+Controller = ControllerType
+"""``--controller``: the values of ``controller.type``."""
+Dialect = SerialDialect
 """``--protocol``: the values of ``serial.protocol``."""
 ExportFormat = Literal["csv", "parquet", "mcap"]
 MotorAction = Literal["start", "stop"]

@@ -33,6 +33,7 @@ logging, realtime, api), :mod:`.schema` (the whole file), :mod:`.files` (reading
 from groundstation.config.base import ConfigModel, Covariance, FieldValueError
 from groundstation.config.controller import (
     ControllerConfig,
+    ControllerType,
     ExternalForceConfig,
     HinfConfig,
     LqrConfig,
@@ -104,6 +105,7 @@ __all__ = [
     "ConfigError",
     "ConfigModel",
     "ControllerConfig",
+    "ControllerType",
     "Covariance",
     "DirectoryPath",
     "EstimatorConfig",

@@ -22,6 +22,9 @@ from groundstation.config.ranges import (
     within,
 )
 
+ControllerType = Literal["lqr-ff", "lqr-cv", "lqr-cp", "pid", "hinf"]
+"""The controllers ``controller.type`` names (``gs fly --controller`` offers the same)."""
+
 
 class LqrConfig(ConfigModel):
     """LQR with a reference model (thesis Ch. 9). Weights on the error e = r - y."""
@@ -180,7 +183,7 @@ class ControllerConfig(ConfigModel):
     """Which controller flies and how it is tuned. Every controller is designed at the
     command period (1 / serial.command_rate_hz) and steps once per COMMAND."""
 
-    type: Literal["lqr-ff", "lqr-cv", "lqr-cp", "pid", "hinf"] = "lqr-ff"
+    type: ControllerType = "lqr-ff"
     # lqr-ff: feed-forward reference model (beyond the thesis; best in `gs eval`);
     # lqr-cv / lqr-cp: the thesis's constant-velocity / constant-position models (Ch. 9, 11)
     lqr_ff: LqrFfConfig = LqrFfConfig()
