@@ -7,9 +7,9 @@ states), with the reference ``lead_s`` ahead for the controllers that ask for a
 preview, built before timing. Each controller's ``step()`` (and its ``sent()``,
 which the loop calls after every COMMAND) is timed one call at a time with
 ``time.perf_counter_ns`` after a warm-up; the script prints median, p99 and max in
-microseconds. Targets: p99 <= 100 us for the feed-forward LQR (issue 13; as it flies, with
-the accelerometer's external-force estimate, and without it), <= 50 us for the others
-(issue 7); it exits with status 1 if a controller misses its target.
+microseconds. Targets: p99 <= 100 us for the feed-forward LQR (as it flies, with
+the accelerometer's external-force estimate, and without it), <= 50 us for the others;
+it exits with status 1 if a controller misses its target.
 
 Run: ``.venv/bin/python benchmarks/bench_controller.py``
 """

@@ -5,7 +5,7 @@ per dialect and trajectory, and prints from each flight's ``meta.json`` and repo
 the serial line used per direction (bytes per second and share of the 57600-baud line),
 in the AscTec LL dialect the polls (unanswered) and command acknowledgements (missing,
 command-to-acknowledgement p50/p99), and the tracking error against the lab's ground
-truth (RMS and maximum) with the LL figure relative to the X-3D's (issue 16: within 20 %).
+truth (RMS and maximum) with the LL figure relative to the X-3D's (within 20 %).
 
     .venv/bin/python benchmarks/bench_dialects.py                    # hover 20 s and the square
     .venv/bin/python benchmarks/bench_dialects.py --trajectory hover --duration 20

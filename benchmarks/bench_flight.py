@@ -3,13 +3,13 @@
 Measures, in real-time flights over a real pty and UDP against `gs sim-device` in a
 child process:
 
-* from the **vehicle's side** (issue 14, as an independent lab measures it): for each
+* from the **vehicle's side** (as an independent lab measures it): for each
   COMMAND, the time from the last byte of the DATA frame before it leaving the virtual
   vehicle to the COMMAND arriving (latency p50/p99), and the COMMAND gaps the
   vehicle's 100 ms watchdog sees (the time after each COMMAND with a non-zero mask
   until the next one): its longest, and how many exceed 50 ms. The virtual lab's
   real-time runner stamps both instants (``sim_device/wire.py``);
-* from the daemon's side (issue 8): tick compute time p50/p99 (DATA sample in hand ->
+* from the daemon's side: tick compute time p50/p99 (DATA sample in hand ->
   COMMAND written), schedule jitter p99 (tick start minus the DATA frame's receive
   time), DATA-to-COMMAND latency p50/p99, the COMMAND rate sustained, the garbage
   collector's pauses, and the resident set size over the flight (flat = no growth
@@ -51,13 +51,14 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from groundstation.app.daemon import FlightDaemon, FlightSummary  # noqa: E402
 from groundstation.config import (  # noqa: E402
     GroundStationConfig,
     apply_overrides,
     dump_config,
     load_config,
 )
-from groundstation.loop.daemon import FlightDaemon, FlightSummary  # noqa: E402
+from groundstation.flight.assembly import assemble  # noqa: E402
 from sim_device.realtime import SimDeviceProcess  # noqa: E402
 from sim_device.wire import WireRecord  # noqa: E402
 
@@ -120,7 +121,7 @@ def fly_once(base: GroundStationConfig, tmp: Path, k: int, seconds: float,
         sampler.start()
         cpu0 = time.process_time()
         try:
-            summary = FlightDaemon(cfg, duration_s=seconds).run()
+            summary = FlightDaemon(assemble(cfg), duration_s=seconds).run()
         finally:
             done.set()
         cpu = time.process_time() - cpu0
@@ -199,7 +200,7 @@ def ms(values: np.ndarray, q: float) -> str:
 
 def report_one(flight: Flight, args: argparse.Namespace, samples: list[tuple[float, float]],
                command_rate: float, data_period_ms: int) -> None:
-    """The single-flight report (issue 8's figures)."""
+    """The single-flight report: the vehicle's figures and the daemon's."""
     summary = flight.summary
     p = summary.percentiles()
     print(f"flight: {summary.final_state.name} ({summary.outcome.name}), {summary.ticks} ticks "

@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
+from groundstation.app.recorder import FlightRecorder
 from groundstation.asctec.messages import CommandMsg
-from groundstation.loop.recorder import FlightRecorder
 from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
 

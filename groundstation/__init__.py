@@ -11,6 +11,25 @@ Conventions used throughout the package (README, "Conventions"):
   ``Rotation.from_quat(q, scalar_first=True).as_matrix() == eCb``. Kinematics:
   ``q_dot = 0.5 * q ⊗ [0, omega]`` with ``omega`` the body rates (FRD) [rad/s].
 * Times are seconds on the monotonic clock (``time.monotonic()``).
+
+The package stands in layers (:data:`LAYERS`, drawn in docs/architecture.md): a module
+imports only its own unit and units of the layers below, never one above or beside it,
+and nothing imports in a circle (``tests/test_layers.py`` checks it from the source).
 """
 
 __version__ = "0.1.0"
+
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("errors", "types", "endpoints", "logs"),  # the foundation: no import of the package
+    ("model",),  # physics and the thesis's numbers
+    ("config", "asctec", "vicon", "estimation", "control"),  # the YAML schema; the pure
+    # codecs, filters and controllers with their plain parameter records: none knows another
+    ("telemetry", "lab"),  # the publisher, request socket and schema; the virtual lab's face
+    ("flight", "client"),  # the flight without I/O and its assembly; the Python client
+    ("app",),  # the real-time daemon, gs fly, the in-process runner, the recorder
+    ("evaluation", "export"),  # after a flight: metrics, figures, reports; CSV/Parquet/MCAP
+    ("identification", "calibration", "linkcheck"),  # the lab's measuring tools
+    ("cli",),  # the gs command
+    ("__main__",),  # python -m groundstation
+)
+"""The package's units (its top-level subpackages and modules), bottom layer first."""

@@ -1,4 +1,4 @@
-"""A vehicle's first day: ``gs calibrate imu`` and ``gs calibrate vicon`` (issue 17).
+"""A vehicle's first day: ``gs calibrate imu`` and ``gs calibrate vicon``.
 
 Both measure with the vehicle at rest on the floor, through the same link and Vicon
 client a flight uses (either serial dialect; nothing is commanded: the link never sends
@@ -30,11 +30,10 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import t as student_t
 
 from groundstation.asctec.dialect import open_link
-from groundstation.config import GroundStationConfig
 from groundstation.errors import GroundStationError
-from groundstation.loop.inputs import imu_scaling
+from groundstation.flight.params import FlightParams
 from groundstation.types import FloatArray
-from groundstation.vicon.client import ViconClient
+from groundstation.vicon.receiver import ViconReceiver
 
 MOVING_POSITION_M = 0.005
 """At rest, the mean Vicon position of a fifth of the measurement stays this close to the
@@ -223,7 +222,7 @@ def _vec(values: tuple[float, ...], fmt: str) -> str:
     return " ".join(fmt.format(v) for v in values)
 
 
-def _collect_poses(client: ViconClient, seconds: float) -> list[Any]:
+def _collect_poses(client: ViconReceiver, seconds: float) -> list[Any]:
     poses = []
     end = time.monotonic() + seconds
     while (left := end - time.monotonic()) > 0:
@@ -304,18 +303,17 @@ def _check_still(positions: FloatArray | None, quaternions: FloatArray | None,
                                    f"{limit:.2f} rad/s); keep it still and retry")
 
 
-def calibrate_imu(config: GroundStationConfig, seconds: float = 10.0,
+def calibrate_imu(params: FlightParams, seconds: float = 10.0,
                   use_vicon: bool = True) -> ImuCalibration:
     """Measure the IMU zeros and noise with the vehicle at rest (see the module docstring).
 
     CalibrationError if no IMU data arrives, too few samples, or the vehicle moves;
     LinkError/ViconError if the port or the Vicon socket cannot be opened.
     """
-    scaling = imu_scaling(config)
-    g = config.vehicle.gravity
-    with open_link(config.serial) as link:
-        vicon = ViconClient.from_config(config.vicon, config.safety).start() if use_vicon \
-            else None
+    scaling = params.imu
+    g = params.vehicle.g
+    with open_link(params.link) as link:
+        vicon = ViconReceiver.from_params(params.vicon).start() if use_vicon else None
         try:
             link.start_stream()
             counts = []
@@ -333,7 +331,7 @@ def calibrate_imu(config: GroundStationConfig, seconds: float = 10.0,
                 vicon.close()
     if len(counts) < 50:
         raise CalibrationError(f"only {len(counts)} IMU samples in {seconds:g} s on "
-                               f"{config.serial.port} (is the vehicle on and the link up?)")
+                               f"{params.link.port} (is the vehicle on and the link up?)")
     c = np.asarray(counts, dtype=float)
     gyro_si = np.array([scaling.gyro.to_si(row) for row in c[:, :3]])
     positions = np.array([p.position for p in poses]) if poses else None
@@ -367,14 +365,15 @@ def _t3(v: FloatArray) -> tuple[float, float, float]:
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
-def calibrate_vicon(config: GroundStationConfig, seconds: float = 10.0) -> ViconCalibration:
+def calibrate_vicon(params: FlightParams, seconds: float = 10.0) -> ViconCalibration:
     """Measure Vicon's noise and stream with the object at rest, and check the frames
     (see the module docstring). CalibrationError without poses or if the object moves."""
-    with ViconClient.from_config(config.vicon, config.safety).start() as client:
+    vicon = params.vicon
+    with ViconReceiver.from_params(vicon).start() as client:
         poses = _collect_poses(client, seconds)
     if len(poses) < 20:
-        raise CalibrationError(f"only {len(poses)} Vicon poses of {config.vicon.object_name!r} in "
-                               f"{seconds:g} s on UDP port {config.vicon.port} (is Tracker "
+        raise CalibrationError(f"only {len(poses)} Vicon poses of {vicon.filter.object_name!r} "
+                               f"in {seconds:g} s on UDP port {vicon.port} (is Tracker "
                                "streaming to this PC, and the object name right?)")
     positions = np.array([p.position for p in poses])
     quaternions = _aligned_quaternions(np.array([p.quaternion for p in poses]))
@@ -387,13 +386,13 @@ def calibrate_vicon(config: GroundStationConfig, seconds: float = 10.0) -> Vicon
     rate = (len(t) - 1) / float(t[-1] - t[0]) if t[-1] > t[0] else math.nan
     measured = _mean_rotation(quaternions)  # body -> NED as the configuration maps it
     error_deg = float(np.degrees(measured.magnitude()))
-    world = config.vicon.world_to_ned.as_matrix()
+    world = np.asarray(vicon.filter.world_to_ned)
     up_ok = bool(np.allclose(world @ np.array([0.0, 0.0, 1.0]), [0.0, 0.0, -1.0], atol=1e-6))
     suggestions: dict[str, Any] = {}
     if not up_ok:
         suggestions["vicon.world_to_ned"] = {"euler_xyz_deg": [180.0, 0.0, 0.0]}
     if error_deg > FRAME_TOLERANCE_DEG:
-        body = Rotation.from_matrix(config.vicon.body_to_object.as_matrix())
+        body = Rotation.from_matrix(np.asarray(vicon.filter.body_to_object))
         fixed = body * measured.inv()  # W R_obj B' = I with W R_obj = M B^T
         angles = [round(float(a), 1) + 0.0 for a in fixed.as_euler("XYZ", degrees=True)]
         suggestions["vicon.body_to_object"] = {"euler_xyz_deg": angles}

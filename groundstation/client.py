@@ -18,7 +18,7 @@ CSV's ``yaw_deg`` column): ``go_to(..., yaw_deg=90)`` faces east, and the replie
 ``yaw_deg``, ``reference_yaw_deg`` and ``target_yaw_deg``. (Until this release the client
 took and reported radians: the ``yaw=`` keyword and the ``yaw``, ``reference_yaw`` and
 ``target_yaw`` attributes still work, in radians, with a DeprecationWarning. The wire
-format, :mod:`groundstation.loop.api`, stays in radians.)
+format, :mod:`groundstation.app.api`, stays in radians.)
 
 Example (``examples/fly_square.py`` flies a square)::
 
@@ -29,8 +29,8 @@ Example (``examples/fly_square.py`` flies a square)::
     gs.go_to([0.5, 0.0, -1.0], yaw_deg=90, wait=True)
     gs.land(wait=True)
 
-Every request is one JSON message on the daemon's control socket
-(``telemetry.control_endpoint``; see :mod:`groundstation.loop.api` for the wire format);
+Every request is one JSON message on the daemon's request socket
+(``telemetry.control_endpoint``; see :mod:`groundstation.app.api` for the wire format);
 a daemon that authenticates clients needs ``server_key`` and ``client_key`` (CURVE).
 """
 
@@ -45,9 +45,9 @@ from pathlib import Path
 from typing import Any
 
 from groundstation.errors import GroundStationError
-from groundstation.telemetry.client import TelemetryClient
-from groundstation.telemetry.control import send_request
 from groundstation.telemetry.curve import CurveClient, load_client_keys
+from groundstation.telemetry.requests import send_request
+from groundstation.telemetry.subscriber import TelemetrySubscriber
 
 DEFAULT_CONTROL = "tcp://127.0.0.1:5557"
 """The daemon's default ``telemetry.control_endpoint``."""
@@ -400,18 +400,18 @@ class Client:
         if not wait:
             self.request({"request": "land"})
             return None
-        with TelemetryClient(self.telemetry, topics=["state"]) as sub:
+        with TelemetrySubscriber(self.telemetry, topics=["state"]) as sub:
             self.request({"request": "land"})  # subscribed first: the end cannot be missed
             return self._final(sub, timeout)
 
     def wait_until_ended(self, timeout: float = 60.0) -> Ended:
         """Block until the flight ends (its final telemetry message); WaitTimeout after
         ``timeout`` [s]."""
-        with TelemetryClient(self.telemetry, topics=["state"]) as sub:
+        with TelemetrySubscriber(self.telemetry, topics=["state"]) as sub:
             self.status()  # still flying (else DaemonUnreachableError): the end is ahead
             return self._final(sub, timeout)
 
-    def _final(self, sub: TelemetryClient, timeout: float) -> Ended:
+    def _final(self, sub: TelemetrySubscriber, timeout: float) -> Ended:
         deadline = time.monotonic() + timeout
         while (left := deadline - time.monotonic()) > 0:
             message = sub.receive(timeout=left)
@@ -487,7 +487,7 @@ class Client:
         """The daemon's telemetry as (topic, payload) pairs (schema:
         :mod:`groundstation.telemetry.schema`), until ``timeout`` [s] passes without a
         message (None: forever) or the flight's final message."""
-        with TelemetryClient(self.telemetry, topics=list(topics)) as sub:
+        with TelemetrySubscriber(self.telemetry, topics=list(topics)) as sub:
             while True:
                 message = sub.receive(timeout=timeout)
                 if message is None:

@@ -1,7 +1,7 @@
 """A flight log as CSV, Parquet or MCAP (``gs export LOG --format csv|parquet|mcap``).
 
-All three carry the columns of ``flight.npy`` (:data:`~groundstation.loop.recorder.FLAT_DTYPE`,
-derived from :data:`~groundstation.loop.recorder.RECORD_DTYPE`), so the formats cannot
+All three carry the columns of ``flight.npy`` (:data:`~groundstation.app.recorder.FLAT_DTYPE`,
+derived from :data:`~groundstation.app.recorder.RECORD_DTYPE`), so the formats cannot
 drift apart from the log or from each other (tests check every column is in each).
 
 CSV (:func:`export_csv`)
@@ -45,10 +45,11 @@ from typing import Any, NamedTuple, TextIO
 
 import numpy as np
 import numpy.typing as npt
+import structlog
 
 from groundstation import __version__
+from groundstation.app.recorder import COLUMN_UNITS, FLAT_DTYPE, RECORD_DTYPE, read_flight
 from groundstation.errors import GroundStationError, RecorderError
-from groundstation.loop.recorder import COLUMN_UNITS, FLAT_DTYPE, RECORD_DTYPE, read_flight
 from groundstation.telemetry.foxglove import (
     TF,
     foxglove_quaternion,
@@ -127,6 +128,20 @@ def _value(v: Any) -> Any:
     if isinstance(v, (np.floating, np.integer, np.bool_)):
         return _value(v.item())
     return v
+
+
+def mcap_after_flight(log_dir: Path, truth: Path | None = None) -> list[str]:
+    """``logging.mcap``: ``log_dir/flight.mcap`` from a flight's closed log, as ``gs fly``
+    writes it once the vehicle is the pilot's (``truth`` is not used). The line saying
+    where it is, or why it was not written (logged too: a flight's MCAP is a convenience,
+    its log the record)."""
+    out = log_dir / "flight.mcap"
+    try:
+        export_mcap(log_dir, out)
+    except Exception as exc:  # the flight is over and its log safe: only the copy is lost
+        structlog.get_logger(__name__).warning("flight.mcap not written", error=str(exc))
+        return [f"  MCAP (logging.mcap): not written: {exc}"]
+    return [f"  MCAP (logging.mcap): {out}"]
 
 
 def export_mcap(log: str | Path, out: str | Path) -> int:

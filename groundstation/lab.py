@@ -7,7 +7,7 @@ register under ``can.interface``; :func:`virtual_lab` loads it by name. The grou
 station then talks to it only through the protocols below:
 
 * :class:`Lab`: a lab stepped on its own simulated clock, for the in-process runner
-  (:mod:`groundstation.loop.inprocess`): bytes in and out of the vehicle's serial
+  (:mod:`groundstation.app.inprocess`): bytes in and out of the vehicle's serial
   port, Vicon datagrams, and the ground truth.
 * :class:`LabPlugin`: what a lab offers the ground station: it validates the
   configuration's ``sim:`` section (which the ground station does not know), builds

@@ -11,7 +11,7 @@ by another ground station is left alone).
 What is judged, each against the figure the flight itself uses where there is one:
 
 * the DATA rate against ``serial.data_period_ms``: at least the rate the preflight
-  requires (80 % of it, :func:`~groundstation.loop.core.limits_from_config`), and no
+  requires (80 % of it, the supervisor's ``min_data_rate_hz``), and no
   silence as long as ``safety.link_loss_s`` (what a flight calls a lost link);
 * rejected frame candidates by reason (CRC, end marker, length, ...): at most
   :data:`MAX_REJECTED_SHARE` of the frames; X-3D DATA of another block mask (the LL
@@ -45,10 +45,8 @@ from groundstation.asctec.blocks import block_names
 from groundstation.asctec.dialect import open_link
 from groundstation.asctec.messages import DataMsg
 from groundstation.asctec.stats import LinkStats
-from groundstation.config import GroundStationConfig
 from groundstation.errors import LinkError
-from groundstation.loop.core import limits_from_config
-from groundstation.loop.inputs import imu_scaling
+from groundstation.flight.params import FlightParams
 
 __all__ = ["LinkCheckReport", "LinkObserver", "assess", "run_link_check"]
 
@@ -277,7 +275,7 @@ def _link_reasons(report_rate: float, min_rate: float, gap: float, loss_s: float
     return reasons
 
 
-def _imu_findings(obs: LinkObserver, config: GroundStationConfig
+def _imu_findings(obs: LinkObserver, params: FlightParams
                   ) -> tuple[list[str], list[str], tuple[float, float, float] | None,
                              tuple[float, float, float] | None]:
     """(reasons, warnings, gyro mean, acc mean) from the raw IMU counts."""
@@ -286,7 +284,7 @@ def _imu_findings(obs: LinkObserver, config: GroundStationConfig
     reasons: list[str] = []
     warnings: list[str] = []
     c = np.asarray(obs.counts, dtype=float)
-    lo, hi = ADC_RANGE.get(config.serial.protocol, ADC_RANGE["x3d"])
+    lo, hi = ADC_RANGE.get(params.link.protocol, ADC_RANGE["x3d"])
     names = ("gyro x", "gyro y", "gyro z", "acc x", "acc y", "acc z")
     for k, name in enumerate(names):
         column = c[:, k]
@@ -296,11 +294,11 @@ def _imu_findings(obs: LinkObserver, config: GroundStationConfig
         elif len(column) >= 50 and np.all(column == column[0]):
             reasons.append(f"{name} reads {int(column[0])} on every sample: a stuck or "
                            "disconnected sensor (a live one shows noise)")
-    scaling = imu_scaling(config)
+    scaling = params.imu
     gyro = np.asarray(scaling.gyro.scale) * (c[:, :3].mean(axis=0) - np.asarray(
         scaling.gyro.zero))
     acc = np.asarray(scaling.acc.scale) * (c[:, 3:].mean(axis=0) - np.asarray(scaling.acc.zero))
-    g = config.vehicle.gravity
+    g = params.vehicle.g
     norm = float(np.linalg.norm(acc))
     if np.any(np.abs(gyro) > REST_GYRO_RAD_S):
         warnings.append(f"the gyro does not read rest (|mean| up to "
@@ -315,7 +313,7 @@ def _imu_findings(obs: LinkObserver, config: GroundStationConfig
             (float(acc[0]), float(acc[1]), float(acc[2])))
 
 
-def _vehicle_findings(obs: LinkObserver, config: GroundStationConfig,
+def _vehicle_findings(obs: LinkObserver, params: FlightParams,
                       expect_switch: bool) -> tuple[list[str], list[str]]:
     """(reasons, warnings) from the STATUS and RC blocks."""
     reasons: list[str] = []
@@ -346,7 +344,7 @@ def _vehicle_findings(obs: LinkObserver, config: GroundStationConfig,
     if not flags & 0x04:
         reasons.append("the vehicle does not receive the pilot's transmitter (STATUS RC-link "
                        "flag clear): nobody to hand back to")
-    land_v = config.safety.battery_land_v
+    land_v = params.supervisor.battery_land_v
     if obs.low_battery_mv is not None and land_v is not None \
             and 1e-3 * obs.low_battery_mv < land_v:
         reasons.append(f"battery at {1e-3 * obs.low_battery_mv:.2f} V, below "
@@ -354,7 +352,7 @@ def _vehicle_findings(obs: LinkObserver, config: GroundStationConfig,
     return reasons, warnings
 
 
-def assess(obs: LinkObserver, stats: LinkStats, config: GroundStationConfig, *,
+def assess(obs: LinkObserver, stats: LinkStats, params: FlightParams, *,
            seconds: float, start: float, end: float, sent: dict[str, int],
            expect_switch: bool = True, failure: str | None = None) -> LinkCheckReport:
     """Judge a link check (see the module docstring).
@@ -364,22 +362,22 @@ def assess(obs: LinkObserver, stats: LinkStats, config: GroundStationConfig, *,
     [s]; sent : what was written, by kind; expect_switch : the serial-enable switch
     position a healthy link shows; failure : the link's own failure, if it failed
     """
-    serial = config.serial
-    expected = 1000.0 / serial.data_period_ms
-    min_rate = limits_from_config(config).min_data_rate_hz
+    link = params.link
+    expected = 1000.0 / link.data_period_ms
+    min_rate = params.supervisor.min_data_rate_hz
     samples = len(obs.times)
     rate = samples / (end - obs.times[0]) if samples and end > obs.times[0] else 0.0
     gap = _gaps(obs.times, end)
     reasons = [f"the serial link failed: {failure}"] if failure else []
     if sent.get("command"):  # nothing here sends one: this would be a bug, and loud
         reasons.append(f"{sent['command']} commands were written during a listen-only check")
-    reasons += _link_reasons(rate, min_rate, gap, config.safety.link_loss_s, stats, samples,
-                             serial.protocol)
-    imu_reasons, imu_warnings, gyro, acc = _imu_findings(obs, config)
-    vehicle_reasons, vehicle_warnings = _vehicle_findings(obs, config, expect_switch)
+    reasons += _link_reasons(rate, min_rate, gap, params.supervisor.link_loss_s, stats,
+                             samples, link.protocol)
+    imu_reasons, imu_warnings, gyro, acc = _imu_findings(obs, params)
+    vehicle_reasons, vehicle_warnings = _vehicle_findings(obs, params, expect_switch)
     status = obs.status
     return LinkCheckReport(
-        protocol=serial.protocol, port=serial.port, seconds=seconds, samples=samples,
+        protocol=link.protocol, port=link.port, seconds=seconds, samples=samples,
         data_rate_hz=rate, expected_rate_hz=expected, min_rate_hz=min_rate,
         longest_gap_s=gap if samples else math.inf,
         first_data_s=obs.times[0] - start if samples else math.inf,
@@ -393,7 +391,7 @@ def assess(obs: LinkObserver, stats: LinkStats, config: GroundStationConfig, *,
         warnings=imu_warnings + vehicle_warnings, stats=stats)
 
 
-def run_link_check(config: GroundStationConfig, seconds: float, *,
+def run_link_check(params: FlightParams, seconds: float, *,
                    expect_switch: bool = True) -> LinkCheckReport:
     """Open the configured link, ask for the data stream, listen for ``seconds`` [s] and
     judge what arrived (:func:`assess`). Only the stream request is ever written (X-3D:
@@ -403,11 +401,11 @@ def run_link_check(config: GroundStationConfig, seconds: float, *,
     flight: the port is locked as ``gs fly`` locks it); a link failing while listening
     is a reason in the report.
     """
-    x3d = config.serial.protocol != "asctec-ll"
+    x3d = params.link.protocol != "asctec-ll"
     obs = LinkObserver()
     failure: str | None = None
     configs = 0
-    with open_link(config.serial) as link:
+    with open_link(params.link) as link:
         start = time.monotonic()  # the clock of the links' receive times
         end = start + seconds
         try:
@@ -430,5 +428,5 @@ def run_link_check(config: GroundStationConfig, seconds: float, *,
     # commands_sent is 0: nothing here sends one (the report would show it otherwise)
     sent = {"config": configs} if x3d else {"poll": stats.polls_sent}
     sent["command"] = stats.commands_sent
-    return assess(obs, stats, config, seconds=seconds, start=start, end=end, sent=sent,
+    return assess(obs, stats, params, seconds=seconds, start=start, end=end, sent=sent,
                   expect_switch=expect_switch, failure=failure)

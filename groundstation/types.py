@@ -8,11 +8,30 @@ Quaternions are scalar-first ``[q0, q1, q2, q3]`` describing the body attitude
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Final, Literal, get_args
 
 import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
+
+Channel = Literal["pitch", "roll", "yaw", "thrust"]
+"""A stick channel of the vehicle; the COMMAND ctrl-mask bit is its index in
+:data:`CHANNELS` (spec section 3.2)."""
+
+CHANNELS: Final[tuple[Channel, ...]] = get_args(Channel)
+"""Channels in ctrl-mask bit order (bit0 pitch, bit1 roll, bit2 yaw, bit3 thrust)."""
+
+Dialect = Literal["x3d", "asctec-ll"]
+"""The vehicle's serial dialect (``serial.protocol``): the X-3D's, or the AscTec AutoPilot
+LL's (docs/protocol.md); configured, never guessed from the bytes."""
+
+SensorBlockName = Literal["status", "gyro", "acc", "pressure", "rc"]
+"""A block of the vehicle's DATA frame; the CONFIG mask bit is its index in
+:data:`SENSOR_BLOCK_NAMES` (spec section 3.3)."""
+
+SENSOR_BLOCK_NAMES: Final[tuple[SensorBlockName, ...]] = get_args(SensorBlockName)
+"""DATA block names in mask bit order (bit0 status ... bit4 rc)."""
 
 
 @dataclass(frozen=True, slots=True)

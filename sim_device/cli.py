@@ -14,7 +14,7 @@ from typing import Annotated
 import typer
 
 from groundstation.cli import load
-from groundstation.cli_options import (
+from groundstation.cli.options import (
     ConfigOption,
     DurationAlias,
     OutAlias,

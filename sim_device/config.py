@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import AfterValidator, Field
+from pydantic import AfterValidator, Field, ValidationError
 
 from groundstation.config import (
     DAY_S,
@@ -25,6 +25,8 @@ from groundstation.config import (
     HostAddress,
     LabCoordinate,
     TurnDeg,
+    raise_problems,
+    validation_problems,
     within,
 )
 
@@ -145,7 +147,7 @@ class SimConfig(ConfigModel):
     dt_s: Annotated[float, within(
         0.0, 0.01, "s: the plant's fixed step; coarser than the 10 ms IMU period cannot "
         "resolve the rate loop and the motors", lo_open=True)] = 0.002
-    # 2 ms fixed step, issue 5 (rate loop, motors)
+    # 2 ms fixed step: resolves the rate loop (64 ms) and the motors (20 ms)
     fifo_priority: FifoPriority | None = None
     # SCHED_FIFO priority of the real-time virtual lab (null: the normal policy). 20
     # makes it stand for hardware that the PC's load never stalls (benchmarks/
@@ -210,10 +212,16 @@ class SimConfig(ConfigModel):
 
 
 def sim_section(config: GroundStationConfig) -> SimConfig:
-    """The configuration's validated ``sim:`` section; the defaults if it has none."""
+    """The configuration's ``sim:`` section as :class:`SimConfig`; the defaults if it has
+    none. The ground station's configuration keeps the section as given until it is
+    assembled (``groundstation.flight.assembly.check_config`` has the lab validate it);
+    one not validated yet is validated here: ConfigError naming every bad key."""
     section = config.sim
     if section is None:
         return SimConfig()
-    if not isinstance(section, SimConfig):  # validate_config put it there, validated
-        raise TypeError(f"sim section of type {type(section).__name__}, not SimConfig")
-    return section
+    if isinstance(section, SimConfig):
+        return section
+    try:
+        return SimConfig.model_validate(section)
+    except ValidationError as exc:
+        raise_problems(validation_problems(exc, "sim"), "<config>")

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -33,6 +33,8 @@ from groundstation.model.sensors import (
     VICON_POSITION_VARIANCE_TABLE_6_1,
     VICON_QUATERNION_VARIANCE_TABLE_6_1,
 )
+from groundstation.types import Dialect
+from groundstation.vicon.frames import rotation_from_euler_deg
 from sim_device.config import SimConfig, SimGroundEffectConfig, SimWindConfig
 
 if TYPE_CHECKING:
@@ -41,9 +43,8 @@ if TYPE_CHECKING:
 Vec3 = tuple[float, float, float]
 LossEncoding = Literal["missing", "zero", "held-identity"]
 LOSS_ENCODINGS: tuple[LossEncoding, ...] = ("missing", "zero", "held-identity")
-Dialect = Literal["x3d", "asctec-ll"]
-"""The serial dialect the virtual vehicle speaks (``serial.protocol``)."""
-DIALECTS: tuple[Dialect, ...] = ("x3d", "asctec-ll")
+DIALECTS: tuple[Dialect, ...] = get_args(Dialect)
+"""The serial dialects the virtual vehicle speaks (``serial.protocol``)."""
 X3D_COUNT_RANGE = (0, 4095)
 """The X-3D DATA stream's 12-bit ADC counts (spec 3.3)."""
 LL_COUNT_RANGE = (-32768, 32767)
@@ -526,8 +527,8 @@ def _vicon_params(config: GroundStationConfig, sim: SimConfig) -> ViconSimParams
         outages=tuple((float(start), float(length)) for start, length in sv.outages),
         tilt_limit_deg=sv.tilt_limit_deg, object_name=vc.object_name, pad_to=sv.pad_to,
         volume_x=sv.volume_x, volume_y=sv.volume_y, volume_z=sv.volume_z,
-        world_to_ned=_mat3(vc.world_to_ned.as_matrix()),
-        body_to_object=_mat3(vc.body_to_object.as_matrix()),
+        world_to_ned=_mat3(rotation_from_euler_deg(vc.world_to_ned.euler_xyz_deg)),
+        body_to_object=_mat3(rotation_from_euler_deg(vc.body_to_object.euler_xyz_deg)),
     )
 
 

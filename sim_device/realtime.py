@@ -58,10 +58,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from groundstation.app.realtime import fifo_priority
+from groundstation.app.signals import on_stop_signals
 from groundstation.config import dump_config
 from groundstation.lab import Announcement
-from groundstation.loop.realtime import fifo_priority
-from groundstation.loop.signals import on_stop_signals
 from sim_device.config import sim_section
 from sim_device.lab import LabStats, VirtualLab
 from sim_device.wire import WireRecord, WireTiming

@@ -18,7 +18,7 @@ component, then renormalised). Lost tracking is sent in the selected encoding:
 
 The frame number counts datagrams, +1 each, wrapping at 2**32.
 
-Two more faults for tests of the ground station's input path (issue 14):
+Two more faults for tests of the ground station's input path:
 
 * a **pause** (:meth:`VirtualVicon.add_pause`): nothing is sent at all (Tracker or
   the network stalls); the frame number keeps counting, as Tracker's cameras do, so

@@ -74,7 +74,7 @@ def _kinds_of_process(args: object) -> list[str]:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    from groundstation.loop.daemon import FlightDaemon
+    from groundstation.app.daemon import FlightDaemon
     from sim_device.realtime import SimDeviceProcess, SimDeviceThread
 
     _watch(SimDeviceThread, "__enter__", "vehicle", "SimDeviceThread")

@@ -7,10 +7,11 @@ from __future__ import annotations
 import socket
 from pathlib import Path
 
+from groundstation.app.inprocess import FlightResult, fly_in_process
+from groundstation.app.recorder import FlightRecorder
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.loop.inprocess import FlightResult, fly_in_process
-from groundstation.loop.recorder import FlightRecorder
-from groundstation.loop.supervisor import State
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import State
 
 REPO = Path(__file__).resolve().parents[1]
 LIVELY_WAYPOINTS = """t,x,y,z,yaw
@@ -51,7 +52,7 @@ def fly_logged(cfg: GroundStationConfig, log_dir: Path,
     """Fly ``cfg`` in-process (simulated clock) for ``duration_s`` of trajectory, recording
     the flight log under ``log_dir``; the flight must end DONE. (log directory, result)."""
     with FlightRecorder.create(log_dir, dump_config(cfg), META) as rec:
-        result = fly_in_process(cfg, duration_s=duration_s, max_time_s=duration_s + 40.0,
+        result = fly_in_process(assemble(cfg), duration_s=duration_s, max_time_s=duration_s + 40.0,
                                 recorder=rec)
         directory = rec.directory
     assert result.final_state is State.DONE, result.transitions

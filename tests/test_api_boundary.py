@@ -22,8 +22,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lab_helpers import sim_config
 
-from groundstation.loop.api import MotionApi
-from groundstation.loop.commander import (
+from groundstation.app.api import MotionApi
+from groundstation.control.trajectories import TrajectorySpec
+from groundstation.flight.assembly import assemble, trajectory_spec
+from groundstation.flight.commander import (
     MAX_MOTION_S,
     MIN_MOTION_S,
     Commander,
@@ -31,12 +33,12 @@ from groundstation.loop.commander import (
     check_target,
     plan_follow,
 )
-from groundstation.loop.core import FlightCore
-from groundstation.loop.planner import PlannerSettings, PrepareFollow, settings_from_config
-from groundstation.loop.supervisor import State
+from groundstation.flight.core import FlightCore
+from groundstation.flight.planner import PlannerSettings, PrepareFollow
+from groundstation.flight.supervisor import State
 
 CFG = sim_config(**{"trajectory.name": "none"})
-SETTINGS: PlannerSettings = settings_from_config(CFG)
+SETTINGS: PlannerSettings = assemble(CFG).planner
 KINDS = {"request", "state", "volume", "infeasible", "busy", "internal"}
 """The documented refusal kinds (README, "What is refused")."""
 README = Path(__file__).resolve().parents[1] / "README.md"
@@ -45,9 +47,9 @@ FIGURE8_3000 = {"name": "figure-eight", "period_s": 3000, "center": [0, 0, -1], 
 
 
 def tracking_api(now_wall: float = 1.7e9) -> MotionApi:
-    core = FlightCore(CFG)
+    core = FlightCore(assemble(CFG))
     core.supervisor.force(0.0, State.TRACK, "test")
-    return MotionApi(core, CFG, clock=lambda: 100.0, wall_clock=lambda: now_wall)
+    return MotionApi(core, core.params, clock=lambda: 100.0, wall_clock=lambda: now_wall)
 
 
 def refused(api: MotionApi, request: dict[str, Any]) -> tuple[str, str]:
@@ -199,9 +201,9 @@ class _BrokenPlanner:
 
 
 def test_a_failure_of_ours_is_answered_internal_and_the_flight_goes_on() -> None:
-    core = FlightCore(CFG)
+    core = FlightCore(assemble(CFG))
     core.supervisor.force(0.0, State.TRACK, "test")
-    api = MotionApi(core, CFG, planner=_BrokenPlanner())
+    api = MotionApi(core, core.params, planner=_BrokenPlanner())
     reply = api.handle({"request": "go_to", "position": [0.3, 0, -1]})
     assert reply == {"ok": False, "kind": "internal", "error": "internal error: KeyError: 'bug'"}
     assert api.handle({"request": "status"})["state"] == "TRACK"
@@ -249,7 +251,8 @@ def test_every_reply_is_ok_or_a_refusal_of_a_documented_kind(request_: dict[str,
     json.loads(json.dumps(reply))
 
 
-def _section(data: dict[str, Any]) -> Any:
+def _section(data: dict[str, Any]) -> TrajectorySpec:
+    """The trajectory of a follow request's ``trajectory:`` section, as the API makes it."""
     from groundstation.config import TrajectoryConfig
 
-    return TrajectoryConfig.model_validate(data)
+    return trajectory_spec(TrajectoryConfig.model_validate(data))

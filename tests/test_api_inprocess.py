@@ -1,4 +1,4 @@
-"""Issue 19: the API's requests in a flight on the virtual lab's simulated clock.
+"""The API's requests in a flight on the virtual lab's simulated clock.
 
 A failsafe pre-empts a motion and refuses new ones; after it clears, motions are
 accepted again and arrive where the ground truth says; a land request ends the flight
@@ -14,16 +14,17 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
-from groundstation.loop.api import MotionApi
-from groundstation.loop.inprocess import InProcessFlight
-from groundstation.loop.supervisor import Outcome, State
+from groundstation.app.api import MotionApi
+from groundstation.app.inprocess import InProcessFlight
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import Outcome, State
 
 
 @pytest.mark.slow
 def test_a_failsafe_preempts_a_motion_and_refuses_new_ones_until_it_clears() -> None:
     cfg = sim_config(**{"trajectory.name": "none"})
-    flight = InProcessFlight(cfg)
-    api = MotionApi(flight.core, cfg, clock=lambda: flight.lab.t,
+    flight = InProcessFlight(assemble(cfg))
+    api = MotionApi(flight.core, flight.params, clock=lambda: flight.lab.t,
                     wall_clock=lambda: flight.lab.t)
     replies: dict[str, dict[str, Any]] = {}
     arrived_at: list[float] = []
@@ -88,8 +89,8 @@ def test_the_hostile_requests_are_refused_and_the_legal_one_flown_safely() -> No
     below the floor refused; none of them changes the plan. The same figure-eight flown for
     20 s is accepted and flown: the truth stays level and on the figure-eight."""
     cfg = sim_config(**{"trajectory.name": "none"})
-    flight = InProcessFlight(cfg)
-    api = MotionApi(flight.core, cfg, clock=lambda: flight.lab.t,
+    flight = InProcessFlight(assemble(cfg))
+    api = MotionApi(flight.core, flight.params, clock=lambda: flight.lab.t,
                     wall_clock=lambda: 1.7e9 + flight.lab.t)
     replies: dict[str, dict[str, Any]] = {}
 

@@ -26,11 +26,12 @@ import numpy as np
 import pytest
 from lab_helpers import free_udp_port
 
+from groundstation.app.daemon import FlightDaemon, FlightSummary
 from groundstation.client import Client, Infeasible
 from groundstation.config import apply_overrides, dump_config, load_config
-from groundstation.loop.commander import MAX_MOTION_S
-from groundstation.loop.daemon import FlightDaemon, FlightSummary
-from groundstation.loop.supervisor import Outcome, State
+from groundstation.flight.assembly import assemble
+from groundstation.flight.commander import MAX_MOTION_S
+from groundstation.flight.supervisor import Outcome, State
 from sim_device.realtime import SimDeviceProcess
 
 REPO = Path(__file__).resolve().parents[1]
@@ -84,7 +85,7 @@ def test_a_long_plan_is_made_off_the_loop_and_the_commands_keep_their_rhythm(
     with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as device:
         cfg = apply_overrides(cfg, {"serial.port": device.pty_path})
         abandon = threading.Event()  # a failed test stops the flight (the daemon lands)
-        daemon = FlightDaemon(cfg, stop=abandon)
+        daemon = FlightDaemon(assemble(cfg), stop=abandon)
         out: dict[str, FlightSummary] = {}
         runner = threading.Thread(target=lambda: out.setdefault("s", daemon.run()))
         runner.start()

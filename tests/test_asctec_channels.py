@@ -7,9 +7,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from groundstation.asctec.channels import ChannelHandover
-from groundstation.asctec.messages import CHANNELS, Channel, CommandMsg
+from groundstation.asctec.messages import CommandMsg
 from groundstation.errors import ConfigError, ProtocolError
-from groundstation.types import Sticks
+from groundstation.types import CHANNELS, Channel, Sticks
 
 PILOT = Sticks(roll=100, pitch=-50, yaw=10, thrust=2000)
 CONTROLLER = Sticks(roll=500, pitch=150, yaw=-90, thrust=2600)

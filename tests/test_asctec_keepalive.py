@@ -18,7 +18,7 @@ RELEASE = CommandMsg(0, 0, 0, 0, 0)
 
 def test_watchdog_constants_match_the_spec() -> None:
     assert WATCHDOG_S == 0.1  # spec section 4: 100 ms
-    assert GAP_WARNING_S == 0.05  # half of it (issue 3)
+    assert GAP_WARNING_S == 0.05  # half of it
 
 
 def simulate(

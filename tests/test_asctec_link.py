@@ -132,7 +132,7 @@ def test_close_sends_a_final_mask_0_command_and_is_idempotent(vehicle: Vehicle) 
 
 
 def test_a_link_that_never_flew_writes_nothing_on_its_way_out(vehicle: Vehicle) -> None:
-    """Issue 14 item 7: a ground station that never commanded the vehicle (never a
+    """A ground station that never commanded the vehicle (never a
     non-zero ctrl mask) must not send ctrl mask 0 when it exits: the vehicle may be in the
     air under another ground station."""
     link = open_link(vehicle)

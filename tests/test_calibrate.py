@@ -1,4 +1,4 @@
-"""`gs calibrate imu` and `gs calibrate vicon` against the virtual lab (issue 17).
+"""`gs calibrate imu` and `gs calibrate vicon` against the virtual lab.
 
 The virtual vehicle runs in its own process, in real time over a pty and UDP, with
 planted values that differ from the defaults the ground station's configuration holds:

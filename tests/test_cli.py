@@ -1,4 +1,4 @@
-"""The `gs` commands that wrap the evaluation, export, replay and the control socket, end to
+"""The `gs` commands that wrap the evaluation, export, replay and the request socket, end to
 end through typer."""
 
 from __future__ import annotations
@@ -12,7 +12,8 @@ import pytest
 from typer.testing import CliRunner
 
 from groundstation.cli import app
-from groundstation.telemetry.control import ControlServer
+from groundstation.flight.assembly import assemble
+from groundstation.telemetry.requests import RequestServer
 
 REPO = Path(__file__).resolve().parents[1]
 runner = CliRunner()
@@ -40,15 +41,15 @@ def test_eval_rejects_an_unknown_scenario() -> None:
 
 @pytest.mark.slow
 def test_report_and_export_of_a_recorded_flight(tmp_path: Path) -> None:
+    from groundstation.app.inprocess import fly_in_process
+    from groundstation.app.recorder import FlightRecorder
     from groundstation.config import apply_overrides, dump_config, load_config
-    from groundstation.loop.inprocess import fly_in_process
-    from groundstation.loop.recorder import FlightRecorder
-    from groundstation.loop.supervisor import State
+    from groundstation.flight.supervisor import State
 
     cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {"trajectory.name": "hover"})
     with FlightRecorder.create(tmp_path, dump_config(cfg),
                                {"supervisor_states": [s.name for s in State]}) as rec:
-        fly_in_process(cfg, duration_s=3.0, max_time_s=40.0, recorder=rec)
+        fly_in_process(assemble(cfg), duration_s=3.0, max_time_s=40.0, recorder=rec)
         log = rec.directory
     res = runner.invoke(app, ["report", str(log), "--out", str(tmp_path / "rep")])
     assert res.exit_code == 0, res.output
@@ -74,7 +75,7 @@ def test_channels_talks_to_the_control_socket() -> None:
             return {"ok": False, "error": "yaw alone is not allowed now"}
         return {"ok": True, "auto": ["thrust"], "state": "TRACK"}
 
-    with ControlServer("tcp://127.0.0.1:*") as server:
+    with RequestServer("tcp://127.0.0.1:*") as server:
         assert server.endpoint is not None
         stop = threading.Event()
 
@@ -111,7 +112,7 @@ def test_channels_with_curve_keys(tmp_path: Path) -> None:
     alice = str(tmp_path / "clients" / "alice.key_secret")
     curve = load_server_keys(tmp_path / "server.key_secret", tmp_path / "clients")
     reply = {"ok": True, "auto": ["thrust"], "state": "TRACK"}
-    with ControlServer("tcp://127.0.0.1:*", curve=curve) as control:
+    with RequestServer("tcp://127.0.0.1:*", curve=curve) as control:
         assert control.endpoint is not None
         stop = threading.Event()
 
@@ -174,8 +175,8 @@ def test_check_config_refuses_a_missing_waypoint_file(tmp_path: Path) -> None:
 
 
 def test_fly_help_documents_every_exit_code() -> None:
-    """`gs fly --help` names each exit code `gs fly` can return (issue 14 item 5)."""
-    from groundstation.loop.flight import EXIT_CODES
+    """`gs fly --help` names each exit code `gs fly` can return."""
+    from groundstation.app.fly import EXIT_CODES
 
     result = runner.invoke(app, ["fly", "--help"], terminal_width=100)
     assert result.exit_code == 0

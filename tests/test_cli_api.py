@@ -1,4 +1,4 @@
-"""`gs keys`, and the run-time API commands' errors without a daemon (issue 19).
+"""`gs keys`, and the run-time API commands' errors without a daemon.
 
 Flights driven through these commands are in tests/test_api_flight.py.
 """
@@ -14,8 +14,8 @@ import pytest
 from typer.testing import CliRunner
 
 from groundstation.cli import app
-from groundstation.telemetry.control import ControlServer, send_request
 from groundstation.telemetry.curve import load_client_keys, load_server_keys
+from groundstation.telemetry.requests import RequestServer, send_request
 
 RUNNER = CliRunner()
 
@@ -31,7 +31,7 @@ def test_gs_keys_makes_pairs_the_daemon_and_a_client_authenticate_with(tmp_path:
     clients.mkdir()
     (clients / "alice.key").write_bytes((keys / "alice.key").read_bytes())
     # the daemon's side and the client's side of a real CURVE handshake
-    with ControlServer("tcp://127.0.0.1:*", curve=load_server_keys(secret, clients)) as server:
+    with RequestServer("tcp://127.0.0.1:*", curve=load_server_keys(secret, clients)) as server:
         assert server.endpoint is not None
         curve = load_client_keys(keys / "alice.key_secret", keys / "server.key")
         done = threading.Event()

@@ -1,4 +1,4 @@
-"""Every `gs` command goes through one error boundary (issue 15): the console script
+"""Every `gs` command goes through one error boundary: the console script
 runs :func:`groundstation.cli.main`, which turns a user's mistake into one line and a
 documented exit code, never a traceback. Run as a user runs it: the installed script
 in a subprocess."""
@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from groundstation.flight.assembly import assemble
 
 ROOT = Path(__file__).resolve().parents[1]
 GS = [sys.executable, "-c", "import sys; from groundstation.cli import main; "
@@ -54,16 +56,16 @@ def test_a_users_mistake_is_one_line_and_a_code(args: tuple[str, ...], code: int
 @pytest.fixture(scope="module")
 def flight_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A short real flight log (in-process flight of the virtual lab, recorder on)."""
+    from groundstation.app.inprocess import fly_in_process
+    from groundstation.app.recorder import FlightRecorder
     from groundstation.config import apply_overrides, dump_config, load_config
-    from groundstation.loop.inprocess import fly_in_process
-    from groundstation.loop.recorder import FlightRecorder
-    from groundstation.loop.supervisor import State
+    from groundstation.flight.supervisor import State
 
     out = tmp_path_factory.mktemp("log")
     cfg = apply_overrides(load_config(ROOT / "config" / "sim.yaml"), {"trajectory.name": "hover"})
     with FlightRecorder.create(out, dump_config(cfg),
                                {"supervisor_states": [s.name for s in State]}) as recorder:
-        fly_in_process(cfg, duration_s=2.0, max_time_s=40.0, recorder=recorder)
+        fly_in_process(assemble(cfg), duration_s=2.0, max_time_s=40.0, recorder=recorder)
     return Path(recorder.directory)
 
 

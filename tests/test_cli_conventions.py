@@ -16,8 +16,8 @@ import typer
 from typer.testing import CliRunner
 
 from groundstation.cli import app
-from groundstation.cli_options import REPLY_TIMEOUT_S, WAIT_TIMEOUT_S
-from groundstation.telemetry.control import ControlServer
+from groundstation.cli.options import REPLY_TIMEOUT_S, WAIT_TIMEOUT_S
+from groundstation.telemetry.requests import RequestServer
 
 runner = CliRunner()
 
@@ -119,7 +119,7 @@ def test_control_commands_reach_the_daemon_by_either_spelling(option: str) -> No
         seen.append(request)
         return {"ok": True, "auto": ["thrust"], "state": "TRACK"}
 
-    with ControlServer("tcp://127.0.0.1:*") as server:
+    with RequestServer("tcp://127.0.0.1:*") as server:
         assert server.endpoint is not None
         stop = threading.Event()
         thread = threading.Thread(target=lambda: [server.poll(handler)

@@ -109,7 +109,7 @@ def test_fly_lists_every_trajectory_including_none_and_waypoints() -> None:
 def test_the_lists_the_help_carries_are_the_packages() -> None:
     """The CLI's lists (kept apart so `gs` starts without importing the evaluation suite
     or the identification) are the ones the package uses."""
-    from groundstation.cli_options import Controller, Dialect, ScaleAxis
+    from groundstation.cli.options import Controller, Dialect, ScaleAxis
     from groundstation.config import ControllerConfig, SerialConfig
     from groundstation.identification import SCALE_AXES
     from sim_device.cli import SCENARIO_NAMES

@@ -1,6 +1,6 @@
 """The Python client speaks degrees, as every other place a user gives a heading (the
 configuration's `trajectory.yaw_deg`, `gs goto --yaw`, a waypoint CSV's `yaw_deg`), while
-the wire stays in radians: checked against a real control socket (pyzmq REP) whose
+the wire stays in radians: checked against a real request socket (pyzmq REP) whose
 handler records what arrives and answers as the daemon's wire format does."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from groundstation.cli import app
 from groundstation.client import BadRequest, Client
-from groundstation.telemetry.control import ControlServer
+from groundstation.telemetry.requests import RequestServer
 
 MOTION = {"id": 4, "kind": "go_to", "state": "moving", "reason": "", "target": [0.5, 0, -1],
           "target_yaw": -math.pi / 2, "duration_s": 2.0, "latency_s": None}
@@ -23,12 +23,12 @@ STATUS = {"ok": True, "state": "TRACK", "reason": "", "commanded": True,
           "estimate": {"position": [0.1, 0.2, -1.0], "velocity": [0, 0, 0], "yaw": math.pi},
           "reference": {"position": [0.0, 0.0, -1.0], "yaw": 3 * math.pi / 4},
           "ground": [0, 0, 0], "motion": MOTION, "health": {"battery_v": 11.1}}
-"""Replies as the daemon's wire format (:mod:`groundstation.loop.api`) writes them: rad."""
+"""Replies as the daemon's wire format (:mod:`groundstation.app.api`) writes them: rad."""
 
 
 @pytest.fixture
 def daemon() -> Iterator[tuple[str, list[dict[str, Any]]]]:
-    """(endpoint, the requests received) of a control socket answering like a daemon."""
+    """(endpoint, the requests received) of a request socket answering like a daemon."""
     seen: list[dict[str, Any]] = []
 
     def handler(request: dict[str, Any]) -> dict[str, Any]:
@@ -37,7 +37,7 @@ def daemon() -> Iterator[tuple[str, list[dict[str, Any]]]]:
             return STATUS
         return {"ok": True, "motion": MOTION}
 
-    with ControlServer("tcp://127.0.0.1:*") as server:
+    with RequestServer("tcp://127.0.0.1:*") as server:
         assert server.endpoint is not None
         stop = threading.Event()
 

@@ -1,4 +1,4 @@
-"""Run-time motions (issue 19): planning, checks and the book of motions, without a flight.
+"""Run-time motions: planning, checks and the book of motions, without a flight.
 
 Independent answers: the boundary conditions a quintic must meet, finite differences of
 its samples, the closed-form minimum-jerk profile, the configured limits and volume.
@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
+from groundstation.app.api import MotionApi
 from groundstation.control.minjerk import smoothstep
-from groundstation.loop.api import MotionApi
-from groundstation.loop.assemble import motion_limits_from_config
-from groundstation.loop.commander import (
+from groundstation.flight.assembly import assemble
+from groundstation.flight.commander import (
     Commander,
     CommandRefusedError,
     MotionLimits,
@@ -28,11 +28,11 @@ from groundstation.loop.commander import (
     plan_hold,
     sample_plan,
 )
-from groundstation.loop.core import FlightCore
-from groundstation.loop.supervisor import State
+from groundstation.flight.core import FlightCore
+from groundstation.flight.supervisor import State
 
 CFG = sim_config(**{"trajectory.name": "none"})
-LIMITS: MotionLimits = motion_limits_from_config(CFG)
+LIMITS: MotionLimits = assemble(CFG).planner.limits
 HOME = np.array([0.0, 0.0, -1.0])
 GROUND = np.array([0.0, 0.0, 0.0])
 
@@ -181,11 +181,12 @@ def test_hold_stops_a_moving_reference_smoothly_within_the_limits() -> None:
 
 def test_follow_flies_to_the_start_then_the_trajectory_with_a_continuous_heading() -> None:
     from groundstation.control.trajectory import Hover
-    from groundstation.loop.assemble import trajectory_for_flight
+    from groundstation.flight.prepare import trajectory_for_flight
 
     section = CFG.trajectory.model_copy(update={"name": "figure-eight", "period_s": 10.0,
                                                 "yaw_deg": 170.0})
-    trajectory, duration = trajectory_for_flight(CFG.model_copy(update={"trajectory": section}))
+    trajectory, duration = trajectory_for_flight(assemble(CFG.model_copy(
+        update={"trajectory": section})))
     commander = Commander(HOME, -3.0, arrival_tolerance_m=0.05, idle_land_s=60.0)
     planned = plan_follow(_base(commander, 0.0), trajectory, duration, LIMITS)
     commander.install(planned, 0.0)
@@ -262,34 +263,35 @@ def test_motions_start_arrive_are_preempted_and_idle_flights_land() -> None:
 ])
 def test_requests_are_checked_before_anything_flies(request_: dict[str, Any], kind: str,
                                                     words: str) -> None:
-    api = MotionApi(FlightCore(CFG), CFG)
+    core = FlightCore(assemble(CFG))
+    api = MotionApi(core, core.params)
     reply = api.handle(request_)
     assert reply["ok"] is False and reply["kind"] == kind and words in reply["error"], reply
 
 
 def test_a_flight_with_a_configured_trajectory_refuses_motions() -> None:
     cfg = sim_config(**{"trajectory.name": "square"})
-    core = FlightCore(cfg)
+    core = FlightCore(assemble(cfg))
     core.supervisor.force(0.0, State.TRACK, "test")
-    reply = MotionApi(core, cfg).handle({"request": "go_to", "position": [0, 0, -1]})
+    reply = MotionApi(core, core.params).handle({"request": "go_to", "position": [0, 0, -1]})
     assert reply["kind"] == "state" and "--trajectory none" in reply["error"]
-    status = MotionApi(core, cfg).handle({"request": "status"})
+    status = MotionApi(core, core.params).handle({"request": "status"})
     assert status["ok"] and status["commanded"] is False and status["state"] == "TRACK"
 
 
 def test_follow_start_at_is_a_unix_time_converted_to_trajectory_time() -> None:
     """``start_at`` 5 s from now (the client's clock) begins the trajectory 5 s of
     trajectory time after the loop's present, whatever the planning lead."""
-    from groundstation.loop.assemble import trajectory_for_flight
+    from groundstation.flight.prepare import trajectory_for_flight
 
-    core = FlightCore(CFG)
+    core = FlightCore(assemble(CFG))
     core.supervisor.force(0.0, State.TRACK, "test")
-    api = MotionApi(core, CFG, clock=lambda: 100.0, wall_clock=lambda: 1.7e9)
+    api = MotionApi(core, core.params, clock=lambda: 100.0, wall_clock=lambda: 1.7e9)
     section = {"name": "figure-eight", "period_s": 10.0, "center": [0.0, 0.0, -1.0]}
     reply = api.handle({"request": "follow", "trajectory": section, "start_at": 1.7e9 + 5.0})
     assert reply["ok"], reply
-    _, duration = trajectory_for_flight(CFG.model_copy(update={
-        "trajectory": CFG.trajectory.model_copy(update=section)}))
+    _, duration = trajectory_for_flight(assemble(CFG.model_copy(update={
+        "trajectory": CFG.trajectory.model_copy(update=section)})))
     begin = core.mission.trajectory_time + 5.0
     assert reply["motion"]["duration_s"] == pytest.approx(begin + duration - 0.05)
     late = api.handle({"request": "follow", "trajectory": section, "start_at": 1.7e9 + 0.2})

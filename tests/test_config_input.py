@@ -1,4 +1,4 @@
-"""Hostile configuration files (issue 14 item 8): every bad file or value is refused with exit
+"""Hostile configuration files: every bad file or value is refused with exit
 2 and a message naming the field, the value and the reason, through `gs check-config` and
 through the `load()` that `gs fly` runs; never a traceback, never a silent default."""
 

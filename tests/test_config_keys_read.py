@@ -1,4 +1,4 @@
-"""Every key of the ground station's configuration is read (issue 15: no key that nothing
+"""Every key of the ground station's configuration is read (no key that nothing
 reads; `estimator.ignore_variance`, `safety.gravity_check_deg` and
 `safety.takeoff_height_m` were validated, documented and never read).
 
@@ -6,7 +6,7 @@ Reads of configuration fields are recorded (``ConfigModel.__getattribute__`` wra
 the ground station does what a configuration drives: the flight core for every controller
 type, a short real-time flight of the daemon against the virtual lab over a pty and UDP
 (serial link, Vicon, telemetry, flight log, real-time settings), ``gs synth hinf`` (the
-H-infinity design keys), the control socket with CURVE keys, the virtual lab's parameters
+H-infinity design keys), the request socket with CURVE keys, the virtual lab's parameters
 (the vehicle it simulates), and in the AscTec LL dialect the flight core, the lab and
 ``gs motors start`` over its link (the ``serial.ll`` keys). The
 configurations are built before recording starts, so a key that only a validator looks at
@@ -28,6 +28,9 @@ from lab_helpers import free_udp_port
 from pydantic import BaseModel
 from typer.testing import CliRunner
 
+from groundstation.app.api import MotionApi
+from groundstation.app.daemon import FlightDaemon
+from groundstation.app.motors import motor_gesture_command
 from groundstation.cli import app
 from groundstation.config import (
     ConfigModel,
@@ -36,11 +39,9 @@ from groundstation.config import (
     dump_config,
     load_config,
 )
-from groundstation.loop.api import MotionApi
-from groundstation.loop.core import FlightCore
-from groundstation.loop.daemon import FlightDaemon
-from groundstation.loop.motors import motor_gesture_command
-from groundstation.telemetry.control import ControlServer
+from groundstation.flight.assembly import assemble
+from groundstation.flight.core import FlightCore
+from groundstation.telemetry.requests import RequestServer
 from sim_device.params import LabParams
 from sim_device.realtime import SimDeviceProcess
 
@@ -108,7 +109,7 @@ def _fly_briefly(cfg: GroundStationConfig, tmp_path: Path) -> int:
         flying = apply_overrides(cfg, {"serial.port": device.pty_path})
         out: dict[str, int] = {}
         runner = threading.Thread(
-            target=lambda: out.setdefault("exit", int(FlightDaemon(flying, duration_s=1.0)
+            target=lambda: out.setdefault("exit", int(FlightDaemon(assemble(flying), duration_s=1.0)
                                                       .run().outcome)))
         runner.start()
         runner.join(90.0)
@@ -122,8 +123,15 @@ def _motors(cfg: GroundStationConfig, tmp_path: Path) -> int:
     cfg_file = tmp_path / "ll.yaml"
     cfg_file.write_text(dump_config(cfg), encoding="utf-8")
     with SimDeviceProcess(cfg_file, tmp_path / "ll-truth.npz") as device:
-        return motor_gesture_command(apply_overrides(cfg, {"serial.port": device.pty_path}),
-                                     start=True, echo=lambda _line: None)
+        flying = apply_overrides(cfg, {"serial.port": device.pty_path})
+        return motor_gesture_command(assemble(flying).link, start=True,
+                                     echo=lambda _line: None)
+
+
+def _api(cfg: GroundStationConfig) -> MotionApi:
+    """The run-time API of a commanded flight (reads the ``api`` keys)."""
+    core = FlightCore(assemble(cfg))
+    return MotionApi(core, core.params)
 
 
 @pytest.mark.realtime
@@ -149,18 +157,19 @@ def test_every_configuration_key_is_read(tmp_path: Path) -> None:
     hinf_file = tmp_path / "hinf.yaml"
     hinf_file.write_text(dump_config(base), encoding="utf-8")
     steps: dict[str, Callable[[], object]] = {
-        **{f"flight core ({kind})": (lambda c=cfg: FlightCore(c)) for kind, cfg in kinds.items()},
+        **{f"flight core ({kind})": (lambda c=cfg: FlightCore(assemble(c)))
+           for kind, cfg in kinds.items()},
         "virtual lab parameters": lambda: LabParams.from_config(base),
         "gs synth hinf": lambda: CliRunner().invoke(
             app, ["synth", "hinf", "--config", str(hinf_file), "--out",
                   str(tmp_path / "g.npz")]),
-        "control socket with CURVE": lambda: ControlServer.from_config(curve.telemetry).close(),
+        "request socket with CURVE": lambda: RequestServer.from_params(
+            assemble(curve).requests).close(),
         "real-time flight": lambda: _fly_briefly(base, tmp_path),
-        "flight core (asctec-ll)": lambda: FlightCore(ll),
+        "flight core (asctec-ll)": lambda: FlightCore(assemble(ll)),
         "virtual lab parameters (asctec-ll)": lambda: LabParams.from_config(ll),
         "gs motors start (asctec-ll)": lambda: _motors(ll, tmp_path),
-        "run-time API (trajectory none)": lambda: MotionApi(
-            FlightCore(commanded), commanded),
+        "run-time API (trajectory none)": lambda: _api(commanded),
     }
     reads: set[Read] = set()
     results = {}

@@ -42,6 +42,7 @@ from groundstation.config import (
     zmq_endpoint,
 )
 from groundstation.errors import ConfigError
+from groundstation.flight.assembly import check_config
 from sim_device.config import SimConfig
 
 REPO = Path(__file__).resolve().parents[1]
@@ -54,8 +55,10 @@ VICON_POSITION_VARIANCE = (4.16e-7, 3.28e-9, 2.91e-7)  # Table 6.1 [m^2]
 
 
 def _problems(data: dict[str, Any]) -> list[tuple[str, object, str]]:
+    """The problems a command reports for ``data``: validated, then checked where it is
+    assembled (the virtual lab validates its ``sim:`` section there)."""
     with pytest.raises(ConfigError) as info:
-        validate_config(data, "test.yaml")
+        check_config(validate_config(data, "test.yaml"), "test.yaml")
     return list(info.value.problems)
 
 
@@ -300,7 +303,7 @@ def test_a_file_key_is_a_regular_file(tmp_path: Path) -> None:
     field, _, reason = _only_problem({"sim": {"truth_file": str(tmp_path)}})
     assert field == "sim.truth_file" and "a directory" in reason
     # a truth file that does not exist yet is fine where it can be written
-    validate_config({"sim": {"truth_file": str(tmp_path / "later" / "truth.npz")}})
+    check_config(validate_config({"sim": {"truth_file": str(tmp_path / "later" / "truth.npz")}}))
 
 
 # --------------------------------------------------------------------------- addresses
@@ -507,8 +510,8 @@ def test_an_absurd_number_anywhere_is_a_config_error_naming_its_field(
         number = value.draw(ABSURD_INT if leaf.integer else ABSURD_FLOAT)
     path = tmp_path / "fuzzed.yaml"  # written by PyYAML, as another tool would
     path.write_text(yaml.safe_dump(leaf.data(number)), encoding="utf-8")
-    with pytest.raises(ConfigError) as info:
-        load_config(path)
+    with pytest.raises(ConfigError) as info:  # as a command reads it (the lab checks sim:)
+        check_config(load_config(path), str(path))
     fields = [field for field, _, _ in info.value.problems]
     assert any(f == leaf.path or f.startswith(f"{leaf.path}.") for f in fields), (
         leaf, number, info.value.problems)

@@ -1,4 +1,4 @@
-"""One declaration per parameter (issue 15).
+"""One declaration per parameter.
 
 The thesis's numbers are declared once, in the model package, and every default
 elsewhere (the configuration, the EKF, the controllers' design model, the virtual
@@ -21,7 +21,8 @@ import pytest
 from groundstation.config import GroundStationConfig, load_config, validate_config
 from groundstation.errors import ConfigError
 from groundstation.estimation.records import EkfParams
-from groundstation.loop.core import FlightCore
+from groundstation.flight.assembly import assemble
+from groundstation.flight.core import FlightCore
 from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.model.sensors import (
     ACC_SATURATION_M_S2,
@@ -139,10 +140,10 @@ def test_the_gravity_check_key_reaches_the_estimator() -> None:
     data["safety"]["gravity_check_deg"] = 4.0
     data["serial"]["data_period_ms"] = 5
     changed = validate_config(data)
-    core = FlightCore(changed)
+    core = FlightCore(assemble(changed))
     assert core.ekf.params.gravity_check_deg == 4.0
     assert core.ekf.params.imu_period == 0.005
-    default = FlightCore(base)
+    default = FlightCore(assemble(base))
     assert default.ekf.params.gravity_check_deg == 10.0
     assert default.ekf.params.imu_period == base.serial.data_period_ms / 1000.0
 

@@ -186,7 +186,7 @@ ALL = {**FACTORIES, "lqr-ff": FeedforwardLqr}
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(ALL))
 def test_every_controller_removes_a_15_percent_thrust_error(name: str) -> None:
-    """Issue 13: zero steady-state error with the thrust map 15 % off, either way
+    """Zero steady-state error with the thrust map 15 % off, either way
     (integrators, the disturbance observer, the PID's velocity integrators)."""
     for scale in (0.85, 1.15):
         r = simulate(ALL[name](), make_trajectory("hover"), 30.0,
@@ -197,7 +197,7 @@ def test_every_controller_removes_a_15_percent_thrust_error(name: str) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(ALL))
 def test_every_controller_is_stable_with_each_rate_gain_30_percent_off(name: str) -> None:
-    """Issue 13: each rate gain 30 % below or above the configured one (the independent
+    """Each rate gain 30 % below or above the configured one (the independent
     lab's yaw gain was 36 % high), one axis at a time and all together: the vehicle
     recovers a 10 cm offset and a 10 degree heading error and settles."""
     cases = [(s, 1.0, 1.0) for s in (0.7, 1.3)] + [(1.0, s, 1.0) for s in (0.7, 1.3)]

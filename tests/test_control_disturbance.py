@@ -49,7 +49,7 @@ def test_bad_time_constant_is_refused() -> None:
 
 @pytest.mark.slow
 def test_the_lqr_observer_learns_only_from_fully_automatic_commands() -> None:
-    """Issue 13: a step whose COMMAND went out with the pilot on a channel, or during a
+    """A step whose COMMAND went out with the pilot on a channel, or during a
     handover blend, is not the model's input: the estimate holds over it."""
     from groundstation.control import LqrController
     from groundstation.types import ControlOutput, Reference, StateEstimate

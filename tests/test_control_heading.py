@@ -1,4 +1,4 @@
-"""Every controller flies the same at any heading and while the heading turns (issue 13).
+"""Every controller flies the same at any heading and while the heading turns.
 
 The quadrotor's dynamics do not depend on its heading: a flight turned about the
 vertical by psi (vehicle, trajectory and its heading) must produce the same

@@ -113,7 +113,7 @@ def _sampled_loop_radius(gain: HinfGain, k_rate: float, tau: float, k_thrust: fl
 def test_robust_gain_is_stable_over_the_uncertainty_box(lag_gain: HinfGain, k_rate: float,
                                                         tau_scale: float,
                                                         k_thrust: float) -> None:
-    """Issue 13: stable with each rate gain 30 % off (and the rate loop's time constant,
+    """Stable with each rate gain 30 % off (and the rate loop's time constant,
     mass and thrust map off), at 50 Hz with 5-30 ms of command delay plus the frames'
     11 ms on the wire and a 20 ms motor lag the design never saw. Reached <= 0.987."""
     for delay in (0.016, 0.041):

@@ -1,6 +1,6 @@
 """Controllers in the virtual lab: the whole chain, on the simulated clock.
 
-``groundstation.loop.inprocess.fly_in_process`` flies the flight core against
+``groundstation.app.inprocess.fly_in_process`` flies the flight core against
 ``sim_device.VirtualLab``: COMMAND bytes into the virtual X-3D (rate-loop lag
 0.064 s, 20 ms command delay, motor lag, battery droop, IMU biases), DATA bytes
 and Vicon datagrams back through the decoders and the EKF. The controller sees
@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.app.inprocess import FlightResult, fly_in_process
 from groundstation.config import GroundStationConfig, apply_overrides, load_config
 from groundstation.control import (
     Controller,
@@ -24,9 +25,8 @@ from groundstation.control import (
 )
 from groundstation.control.hinf import HinfController, default_gain_path, load_hinf_gain
 from groundstation.evaluation.metrics import error_norms, rms, time_lag
-from groundstation.loop.inprocess import FlightResult, fly_in_process
-from groundstation.loop.inputs import quadrotor_params
-from groundstation.loop.supervisor import State
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import State
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -37,7 +37,8 @@ def lab_config(**overrides: object) -> GroundStationConfig:
 
 def fly(cfg: GroundStationConfig, controller: Controller, trajectory: str,
         duration_s: float) -> FlightResult:
-    return fly_in_process(cfg, controller=controller, trajectory=make_trajectory(trajectory),
+    return fly_in_process(assemble(cfg), controller=controller,
+                          trajectory=make_trajectory(trajectory),
                           duration_s=duration_s, max_time_s=duration_s + 40.0)
 
 
@@ -46,7 +47,7 @@ def square_10hz() -> dict[str, tuple[float, float]]:
     """Second-lap (RMS xy error [m], time lag [s]) of each controller, Vicon at 10 Hz."""
     cfg = lab_config(**{"trajectory.name": "square", "sim.vicon.rate_hz": 10.0,
                         "trajectory.shaping": "none"})  # the thesis's sharp square
-    params = quadrotor_params(cfg)
+    params = assemble(cfg).vehicle
     controllers: dict[str, Controller] = {
         "lqr-cv": LqrController(params=params, reference_model="velocity"),
         "lqr-cp": LqrController(params=params, reference_model="position"),
@@ -91,7 +92,7 @@ def _hover_z_offset(result: FlightResult, state: State) -> float:
 @pytest.mark.slow
 def test_ten_percent_thrust_error_is_removed_by_the_observer() -> None:
     cfg = lab_config(**{"trajectory.name": "hover", "sim.thrust_scale": 0.9})
-    params = quadrotor_params(cfg)
+    params = assemble(cfg).vehicle
     with_observer = fly(cfg, LqrController(params=params), "hover", 20.0)
     assert with_observer.final_state is State.DONE
     assert abs(_hover_z_offset(with_observer, State.TRACK)) < 0.005  # reached 1.1 mm
@@ -99,7 +100,7 @@ def test_ten_percent_thrust_error_is_removed_by_the_observer() -> None:
     # 0.1 m g (1 - sum K_j) / (0.9 |K_z|): true net force 0.9 u + 0.1 m g = 0 with, at rest,
     # u = K_z (z - r) + sum_j K_j u (K_j: the gains on the thrust sent during the delay).
     bare = LqrController(params=params, disturbance_tau=None)
-    result = fly_in_process(cfg, controller=bare, trajectory=make_trajectory("hover"),
+    result = fly_in_process(assemble(cfg), controller=bare, trajectory=make_trajectory("hover"),
                             duration_s=20.0, max_time_s=25.0)
     assert State.TRACK not in [tr.new for tr in result.transitions]
     k_past = float(np.sum(bare.gains.K_s[3, 12 + 3::4]))
@@ -110,7 +111,7 @@ def test_ten_percent_thrust_error_is_removed_by_the_observer() -> None:
 @pytest.mark.slow
 def test_hinf_findings_in_the_virtual_lab() -> None:
     cfg = lab_config(**{"trajectory.name": "hover"})
-    params = quadrotor_params(cfg)
+    params = assemble(cfg).vehicle
     thesis = HinfController(load_hinf_gain(default_gain_path(False)), params=params)
     result = fly(cfg, thesis, "hover", 15.0)
     # as on the real X-3D (Ch. 10.3): it cannot hold the vehicle; the supervisor lands
@@ -128,7 +129,7 @@ def test_hinf_findings_in_the_virtual_lab() -> None:
 @pytest.mark.parametrize("controller", ["lqr-ff", "lqr-cv"])
 def test_a_waypoint_file_turning_the_heading_once_around_flies(tmp_path: Path,
                                                                controller: str) -> None:
-    """Issue 13's report: hovering while a waypoint CSV's yaw column turns once around in
+    """A reported failure: hovering while a waypoint CSV's yaw column turns once around in
     20 s, the constant-velocity LQR tilted to 68 degrees near 115 degrees and the
     supervisor landed it. Here on a perturbed vehicle (rate gains 1.3/0.8/1.36, rate loop
     0.083 s, 8 % heavier, 5 % less lift, 30 ms delay), through the EKF at 10 Hz Vicon."""
@@ -140,7 +141,7 @@ def test_a_waypoint_file_turning_the_heading_once_around_flies(tmp_path: Path,
                         "sim.k_rate_scale": [1.3, 0.8, 1.36], "sim.rate_loop_tau_s": 0.083,
                         "sim.mass_scale": 1.08, "sim.thrust_scale": 0.95,
                         "sim.command_delay_s": 0.03})
-    result = fly_in_process(cfg, duration_s=22.0, max_time_s=60.0)
+    result = fly_in_process(assemble(cfg), duration_s=22.0, max_time_s=60.0)
     assert result.final_state is State.DONE and result.success
     track = result.during(State.TRACK)
     q = result.trace["true_q"][track]

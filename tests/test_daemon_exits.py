@@ -28,11 +28,12 @@ import numpy as np
 import pytest
 from lab_helpers import REPO, free_udp_port
 
+from groundstation.app.daemon import FlightDaemon
+from groundstation.app.fly import EXIT_CODES, summary_lines
+from groundstation.app.recorder import LogLoss, read_flight
 from groundstation.config import apply_overrides, dump_config, load_config, validate_config
-from groundstation.loop.daemon import FlightDaemon
-from groundstation.loop.flight import EXIT_CODES, summary_lines
-from groundstation.loop.recorder import LogLoss, read_flight
-from groundstation.loop.supervisor import Outcome, State
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import Outcome, State
 from sim_device.realtime import SimDeviceProcess
 
 GS = str(Path(sys.executable).parent / "gs")
@@ -262,7 +263,7 @@ def test_an_incomplete_log_exits_5_unless_a_failsafe_acted(
     first line says the log is incomplete whatever the code."""
     loss = LogLoss() if complete else LogLoss(
         rows=2844, lost=570, reasons={"No space left on device": 570})
-    summary = dataclasses.replace(FlightDaemon(validate_config({}))._summary(),
+    summary = dataclasses.replace(FlightDaemon(assemble(validate_config({})))._summary(),
                                   outcome=outcome, log=loss, reason="landed")
     assert summary.exit_code == code
     first = summary_lines(summary)[0]

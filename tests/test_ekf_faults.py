@@ -162,7 +162,7 @@ def _after_a_gap(gap_s: float = 1.5) -> tuple[Ekf, TruthSimulator]:
                          ids=["1e297", "-1e308", "100m", "below-floor"])
 def test_implausible_poses_are_refused_and_never_reset_the_filter(
         position: tuple[float, float, float]) -> None:
-    """Issue 14: 99 poses of absurd (or finite but impossible) positions after a 1.5 s
+    """99 poses of absurd (or finite but impossible) positions after a 1.5 s
     gap. They are outside the plausible volume (safety volume + vicon margin), so they
     are refused before any arithmetic: no reset, no overflow warning, state untouched."""
     ekf, sim = _after_a_gap()
@@ -253,7 +253,7 @@ def test_a_wrong_pose_between_true_ones_never_overrules_the_estimate() -> None:
 
 @pytest.mark.slow
 def test_a_reset_needs_poses_that_agree_with_each_other() -> None:
-    """Issue 14: after a gap, poses alternately 15 cm either side of the truth. Each is
+    """After a gap, poses alternately 15 cm either side of the truth. Each is
     within what the IMU may have missed, but no two in a row agree (30 cm in 10 ms is
     beyond max speed), so none re-anchors the filter."""
     ekf, sim = _after_a_gap(1.0)

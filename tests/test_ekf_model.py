@@ -9,7 +9,7 @@ import pytest
 from ekf_truth import SensorNoise, TruthSimulator, square_reference
 from scipy.linalg import expm
 
-from groundstation.config import EstimatorConfig, SafetyConfig, VehicleConfig, ViconConfig
+from groundstation.config import EstimatorConfig, GroundStationConfig, SafetyConfig, ViconConfig
 from groundstation.estimation import Ekf, EkfParams
 from groundstation.estimation.imu_model import (
     boxminus,
@@ -19,6 +19,7 @@ from groundstation.estimation.imu_model import (
     jacobian_flat_index,
     propagate,
 )
+from groundstation.flight.assembly import ekf_params
 from groundstation.model.quaternion import normalize
 
 G = 9.82
@@ -131,15 +132,16 @@ def test_boxplus_boxminus_roundtrip() -> None:
 
 
 def test_params_from_config_and_validation() -> None:
-    p = EkfParams.from_config(VehicleConfig(), EstimatorConfig())
+    p = ekf_params(GroundStationConfig())
     assert p == EkfParams()  # defaults agree with the config defaults (Tables 6.1, 6.3)
     # attitude residual variance is 4 var(q_i) of Table 6.1; q0 is not used
     np.testing.assert_allclose(p.measurement_variance()[3:], 4 * np.array([5.17e-6, 9.74e-6,
                                                                              3.62e-6]))
     np.testing.assert_allclose(p.measurement_variance()[1], 3.28e-9)
     est = EstimatorConfig(r_override=[1e-6] * 3 + [1e-9, 1e-5, 1e-5, 1e-5])
-    np.testing.assert_allclose(EkfParams.from_config(VehicleConfig(), est).measurement_variance(),
-                               [1e-6] * 3 + [4e-5] * 3)
+    np.testing.assert_allclose(
+        ekf_params(GroundStationConfig(estimator=est)).measurement_variance(),
+        [1e-6] * 3 + [4e-5] * 3)
     with pytest.raises(ValueError):
         EkfParams(gyro_var=(1.0, -1.0, 1.0))
     with pytest.raises(ValueError):
@@ -152,12 +154,11 @@ def test_params_from_config_and_validation() -> None:
 
 
 def test_params_take_the_reset_and_the_plausible_volume_from_vicon_and_safety() -> None:
-    default = EkfParams.from_config(VehicleConfig(), EstimatorConfig(), ViconConfig(),
-                                    SafetyConfig())
+    default = ekf_params(GroundStationConfig())
     assert default == EkfParams()  # the defaults agree with the configuration's
     vicon = ViconConfig(reanchor_poses=5, plausibility_margin_m=0.0, max_speed_m_s=2.0)
     safety = SafetyConfig(volume_x=(-1.0, 1.0))
-    p = EkfParams.from_config(VehicleConfig(), EstimatorConfig(), vicon, safety)
+    p = ekf_params(GroundStationConfig(vicon=vicon, safety=safety))
     assert (p.gate_reset_count, p.max_speed, p.max_rotation_rate) == (5, 2.0, 30.0)
     assert p.plausible_volume == ((-1.0, 1.0), (-1.5, 1.5), (-2.0, 0.05))
 

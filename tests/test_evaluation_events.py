@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from groundstation.evaluation.record import TRUTH_LAB, FlightRecord
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from sim_device.evaluation.events import event_metrics
 
 DT = 0.01

@@ -4,7 +4,7 @@ short perturbed suite flown in-process.
 The draws are checked against their stated ranges (perturb.py's constants) over many
 seeds, and the lab's parameters (sim_device.params.LabParams.from_config) against the
 products the overrides define (true gain = model gain x drawn scale, and so on). The
-flown subset is two seeds of two short issue 13 flights; its report must hold every
+flown subset is two seeds of two short shaped flights; its report must hold every
 seed's metrics, the plants, and worst-case figures equal to the worst per-seed ones.
 """
 

@@ -22,7 +22,7 @@ from groundstation.evaluation.metrics import error_norms
 from groundstation.evaluation.record import TIMING_REAL_TIME, TRUTH_LAB
 from groundstation.evaluation.report import report_flight
 from groundstation.evaluation.scoring import flight_metrics
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from sim_device.evaluation.runner import build_daemon, run_in_process, run_real_time
 from sim_device.evaluation.scenarios import STEP_TIME_S, Scenario, scenario_config, select
 

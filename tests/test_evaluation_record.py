@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.app.recorder import FlightRecorder
 from groundstation.asctec.messages import CommandMsg
 from groundstation.config import apply_overrides, load_config
 from groundstation.errors import RecorderError
@@ -29,8 +30,7 @@ from groundstation.evaluation.record import (
 )
 from groundstation.evaluation.report import report_flight, step_from_reference
 from groundstation.evaluation.scoring import flight_metrics
-from groundstation.loop.recorder import FlightRecorder
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from groundstation.model.quaternion import quat_from_euler
 from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
 from sim_device.realtime import run_sim_device

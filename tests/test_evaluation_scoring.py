@@ -1,5 +1,5 @@
 """Scoring of one flight (path, corner and heading figures), the worst case over perturbed
-plants, and issue 13's targets.
+plants, and the evaluation's targets.
 
 Expected values are closed forms: a flight that follows the reference path late is on
 the path (0 off it) but ``v d`` behind it in time; a path that cuts a square's corner
@@ -17,7 +17,7 @@ import pytest
 
 from groundstation.evaluation.record import TRUTH_LAB, FlightRecord
 from groundstation.evaluation.scoring import flight_metrics, worst_case
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from groundstation.model.quaternion import quat_from_euler
 from sim_device.evaluation.targets import TARGETS, check_targets
 

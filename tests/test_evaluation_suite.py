@@ -1,7 +1,7 @@
 """The CI regression test: the thesis's Ch. 11 flights of `gs eval --fast`, every metric held
 to the figure reached.
 
-The Ch. 11 part of the suite (scenarios.THESIS; issue 13's flights are judged by their
+The Ch. 11 part of the suite (scenarios.THESIS; the shaped flights are judged by their
 targets under --perturb, tests/test_evaluation_targets.py) flies in-process against the
 virtual lab with config/sim.yaml (seed 1, deterministic), each flight once, when the
 first test that reads it asks for it (``FlownSuite``; the report test runs `gs eval` on
@@ -32,7 +32,7 @@ from eval_flights import nominal, sharing_flights
 
 from groundstation.config import load_config
 from groundstation.evaluation.metrics import step_figures, track_clock
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from sim_device.evaluation import EvalReport, run_eval
 from sim_device.evaluation.runner import simulate_model
 from sim_device.evaluation.scenarios import STEP_TIME_S, THESIS, select
@@ -192,7 +192,7 @@ def test_vicon_outage_holds_on_the_imu_and_resumes(suite: FlownSuite) -> None:
                       State.DISARM, State.DONE]
     # HOLD from 0.5 s after the last pose until the third pose after the 1 s outage: after a
     # gap the pose filter believes a stream only once vicon.reanchor_poses (3) agree, 0.2 s
-    # at this scenario's 10 Hz (issue 14: never one pose); reached 0.8 s
+    # at this scenario's 10 Hz (never one pose); reached 0.8 s
     assert 0.3 < o.metrics["hold_s"] < 0.9 and o.metrics["hold_max_m"] < 0.1
     assert o.metrics["rms_m"] < 1.1 * suite.metrics["square-lqr-cv"]["rms_m"]
 

@@ -1,4 +1,4 @@
-"""Issue 13's targets, flown in CI: worst case over 5 perturbed vehicles.
+"""The evaluation's targets, flown in CI: worst case over 5 perturbed vehicles.
 
 Every scenario with a target (:data:`sim_device.evaluation.targets.TARGETS`) flies
 in-process on the plants of seeds 1-5 (`gs eval --fast --perturb 1-5`): rate gains

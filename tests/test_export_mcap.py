@@ -1,4 +1,4 @@
-"""`gs export --format mcap` (issue 18): a flight log the robotics viewers open.
+"""`gs export --format mcap`: a flight log the robotics viewers open.
 
 Read back with the `mcap` package's own reader: every JSON channel decodes against its
 JSON Schema's properties, every tick is there on every column topic with the flight log's
@@ -22,8 +22,8 @@ import pytest
 from lab_helpers import fly_logged, sim_config
 from mcap.reader import make_reader
 
+from groundstation.app.recorder import RECORD_DTYPE, read_flight
 from groundstation.export import CHANNELS, FOXGLOVE_TOPICS
-from groundstation.loop.recorder import RECORD_DTYPE, read_flight
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -29,8 +29,8 @@ from mcap.reader import make_reader
 from scipy.spatial.transform import Rotation
 from test_foxglove import _decode, _descriptors
 
+from groundstation.app.recorder import read_flight
 from groundstation.export import CHANNELS, FOXGLOVE_TOPICS
-from groundstation.loop.recorder import read_flight
 
 REPO = Path(__file__).resolve().parents[1]
 

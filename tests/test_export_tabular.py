@@ -25,6 +25,7 @@ import pyarrow.parquet as pq
 import pytest
 from lab_helpers import empty_log, fly_logged, sim_config
 
+from groundstation.app.recorder import COLUMN_UNITS, FLAT_DTYPE, RECORD_DTYPE, read_flight
 from groundstation.export import (
     CSV_PRECISION,
     FIELD_OF_COLUMN,
@@ -33,7 +34,6 @@ from groundstation.export import (
     export_parquet,
     tabular_columns,
 )
-from groundstation.loop.recorder import COLUMN_UNITS, FLAT_DTYPE, RECORD_DTYPE, read_flight
 
 REPO = Path(__file__).resolve().parents[1]
 GS = [sys.executable, "-c", "import sys; from groundstation.cli import main; "

@@ -7,8 +7,9 @@ import pytest
 from ekf_truth import SensorNoise, TruthSimulator, square_reference
 
 from groundstation.config import validate_config
-from groundstation.estimation import Ekf, EkfParams, Estimator, PoseHoldEstimator
-from groundstation.loop.core import INIT_IMU_SAMPLES, FlightCore
+from groundstation.estimation import Ekf, Estimator, PoseHoldEstimator
+from groundstation.flight.assembly import assemble, ekf_params
+from groundstation.flight.core import INIT_IMU_SAMPLES, FlightCore
 from groundstation.types import ImuSample, Pose
 
 
@@ -34,13 +35,13 @@ def test_held_sample_fuses_every_pose_in_order_and_matches_replay() -> None:
     """The old arrangement (filter at the newest sample) fuses each of these poses by
     re-propagation; the flight core's must give the same estimate without any."""
     cfg = validate_config({})
-    core = FlightCore(cfg)
+    core = FlightCore(assemble(cfg))
     stream = _real_time_stream(400)
     # the same initialisation as the core: first pose with the first 20 IMU samples
     first = stream[:INIT_IMU_SAMPLES]
     for imu, pose in first:
         assert core.estimate_step(imu, [pose]) is None
-    ref = Ekf(EkfParams.from_config(cfg.vehicle, cfg.estimator))
+    ref = Ekf(ekf_params(cfg))
     ref.initialise(first[-1][1], [imu for imu, _ in first])
     worst = 0.0
     for imu, pose in stream[INIT_IMU_SAMPLES:]:
@@ -62,7 +63,7 @@ def test_the_core_flies_any_estimator_of_the_protocol() -> None:
     """FlightCore is typed and run against the Estimator protocol, not the EKF: the
     smallest estimator that satisfies it passes through initialisation, updates and the
     per-tick failsafe figures; it checks no gravity, so the preflight would refuse."""
-    core = FlightCore(validate_config({}), estimator=PoseHoldEstimator())
+    core = FlightCore(assemble(validate_config({})), estimator=PoseHoldEstimator())
     assert isinstance(core.ekf, Estimator)
     stream = _real_time_stream(INIT_IMU_SAMPLES + 30)
     for imu, pose in stream[:INIT_IMU_SAMPLES]:

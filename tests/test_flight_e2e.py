@@ -39,14 +39,15 @@ from test_foxglove import _decode as decode
 from test_foxglove import _descriptors as descriptors
 from test_foxglove import _vec as vec
 
+from groundstation.app.daemon import FlightDaemon, FlightSummary
+from groundstation.app.fly import fly_command
+from groundstation.app.recorder import read_flight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.loop.daemon import FlightDaemon, FlightSummary
-from groundstation.loop.flight import fly_command
-from groundstation.loop.recorder import read_flight
-from groundstation.loop.supervisor import State
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import State
 from groundstation.telemetry import foxglove as fx
-from groundstation.telemetry.client import TelemetryClient
-from groundstation.telemetry.control import send_request
+from groundstation.telemetry.requests import send_request
+from groundstation.telemetry.subscriber import TelemetrySubscriber
 from sim_device.realtime import SimDeviceProcess
 from sim_device.wire import WireRecord
 
@@ -240,14 +241,14 @@ def _has_foxglove() -> bool:
 def _fly_over_pty(flight: X3dFlight, cfg: GroundStationConfig) -> None:
     """Fly the 3 s hover with the daemon in this process; on the way a second `gs fly` and
     the pilot's handover of yaw."""
-    daemon = FlightDaemon(cfg, duration_s=3.0)
+    daemon = FlightDaemon(assemble(cfg), duration_s=3.0)
     out: dict[str, FlightSummary] = {}
     runner = threading.Thread(target=lambda: out.setdefault("s", daemon.run()))
     runner.start()
     try:
         assert daemon.ready.wait(10.0)
         assert daemon.telemetry_endpoint is not None
-        client = TelemetryClient(daemon.telemetry_endpoint)
+        client = TelemetrySubscriber(daemon.telemetry_endpoint)
         try:
             topics = flight.topics
             for _ in range(400):  # bounded: telemetry arrives at 20 Hz
@@ -262,7 +263,7 @@ def _fly_over_pty(flight: X3dFlight, cfg: GroundStationConfig) -> None:
             # byte (it used to fail on the Vicon bind and send ctrl mask 0 on its way out:
             # 6 ms with the pilot). The vehicle stamps every frame that reaches it.
             flight.t_second = time.monotonic()
-            flight.second = fly_command(cfg, echo=flight.echoed.append)
+            flight.second = fly_command(assemble(cfg), echo=flight.echoed.append)
             flight.t_second_end = time.monotonic()
             time.sleep(0.2)  # the wire window below ends before the handover
             # Then hand yaw to the pilot and back over the control socket (what
@@ -345,12 +346,16 @@ def test_real_time_flight_over_pty_and_udp(x3d_flight: X3dFlight) -> None:
     assert np.all((rows["battery_v"] > 11.7) & (rows["battery_v"] <= 11.8))
     tracking = rows["state"] == int(State.TRACK)
     assert np.all(rows["vehicle_flags"][tracking] & 0x01)  # the X-3D applied our commands
-    # logging.mcap: the flight as MCAP beside its log, every JSON channel decoding as JSON
-    # (the poses and transforms are Foxglove's protobuf schemas)
+    # logging.mcap: the step gs fly runs after the flight writes it as MCAP beside its log,
+    # every JSON channel decoding as JSON (the poses and transforms are Foxglove's
+    # protobuf schemas)
     from mcap.reader import make_reader
 
-    assert summary.mcap == str(Path(summary.log_dir) / "flight.mcap")
-    with open(summary.mcap, "rb") as fh:
+    from groundstation.export import mcap_after_flight
+
+    mcap = Path(summary.log_dir) / "flight.mcap"
+    assert mcap_after_flight(Path(summary.log_dir)) == [f"  MCAP (logging.mcap): {mcap}"]
+    with open(mcap, "rb") as fh:
         reader = make_reader(fh)
         per_topic: dict[str, int] = {}
         for _schema, channel, message in reader.iter_messages():
@@ -516,7 +521,7 @@ def test_real_time_flight_in_the_asctec_ll_dialect(tmp_path: Path) -> None:
     cfg_file = tmp_path / "lab.yaml"
     cfg_file.write_text(dump_config(cfg), encoding="utf-8")
     with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as device:
-        summary = FlightDaemon(apply_overrides(cfg, {"serial.port": device.pty_path}),
+        summary = FlightDaemon(assemble(apply_overrides(cfg, {"serial.port": device.pty_path})),
                                duration_s=2.0).run()
         time.sleep(0.3)  # the final ctrl mask 0 reaches the vehicle
     assert summary.final_state is State.DONE and summary.success, summary.transitions
@@ -554,7 +559,7 @@ def test_an_ll_vehicle_that_stops_answering_polls_is_link_loss(tmp_path: Path) -
     cfg_file = tmp_path / "lab.yaml"
     cfg_file.write_text(dump_config(cfg), encoding="utf-8")
     with SimDeviceProcess(cfg_file, tmp_path / "truth.npz") as device:
-        summary = FlightDaemon(apply_overrides(cfg, {"serial.port": device.pty_path}),
+        summary = FlightDaemon(assemble(apply_overrides(cfg, {"serial.port": device.pty_path})),
                                duration_s=30.0).run()
         time.sleep(0.3)
     assert summary.final_state is State.LINK_LOST and not summary.success

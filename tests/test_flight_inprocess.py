@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.asctec.messages import CHANNELS
+from groundstation.app.inprocess import Event, FlightResult, InProcessFlight, fly_in_process
+from groundstation.app.recorder import FlightRecorder, read_flight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.loop.inprocess import Event, FlightResult, InProcessFlight, fly_in_process
-from groundstation.loop.recorder import FlightRecorder, read_flight
-from groundstation.loop.supervisor import State
-from groundstation.types import Sticks
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import State
+from groundstation.types import CHANNELS, Sticks
 from sim_device.lab import VirtualLab
 
 REPO = Path(__file__).resolve().parents[1]
@@ -40,7 +40,7 @@ def run_logged(cfg: GroundStationConfig, log_dir: Path, duration_s: float,
     from the first DATA frame on, ending in the flight's final state."""
     with FlightRecorder.create(log_dir, dump_config(cfg),
                                {"supervisor_states": [s.name for s in State]}) as rec:
-        result = InProcessFlight(cfg, duration_s=duration_s, recorder=rec).run(
+        result = InProcessFlight(assemble(cfg), duration_s=duration_s, recorder=rec).run(
             max_time_s=80.0, events=events)
         directory = rec.directory
     rows, meta, _ = read_flight(directory)
@@ -60,7 +60,7 @@ def on_the_ground(result: FlightResult) -> bool:
 
 @pytest.mark.slow
 def test_hover_flight_takes_off_holds_and_lands() -> None:
-    result = fly_in_process(sim_config(), duration_s=8.0, max_time_s=60.0)
+    result = fly_in_process(assemble(sim_config()), duration_s=8.0, max_time_s=60.0)
     assert states(result) == [State.TAKEOFF, State.TRACK, State.LAND, State.DISARM, State.DONE]
     assert result.success and on_the_ground(result)
     track = result.during(State.TRACK)
@@ -76,7 +76,7 @@ def test_hover_flight_takes_off_holds_and_lands() -> None:
 @pytest.mark.slow
 def test_square_lqr_cv_tracks_without_lag_at_10hz_vicon() -> None:
     cfg = sim_config(**{"trajectory.name": "square", "sim.vicon.rate_hz": 10.0})
-    result = fly_in_process(cfg, duration_s=20.0, max_time_s=80.0)
+    result = fly_in_process(assemble(cfg), duration_s=20.0, max_time_s=80.0)
     assert result.final_state is State.DONE
     track = result.during(State.TRACK)
     err = result.trace["true_pos"][track] - result.trace["ref_pos"][track]
@@ -186,7 +186,8 @@ def test_wrong_vicon_rotation_is_refused_before_takeoff() -> None:
     right = sim_config(**{"safety.preflight_timeout_s": 6.0})
     lab = VirtualLab(right)  # the lab is set up correctly...
     wrong = apply_overrides(right, {"vicon.world_to_ned": {"euler_xyz_deg": [0.0, 0.0, 0.0]}})
-    result = fly_in_process(wrong, lab=lab, max_time_s=30.0)  # ...the ground station is not
+    # ...the ground station is not
+    result = fly_in_process(assemble(wrong), lab=lab, max_time_s=30.0)
     assert result.final_state is State.ABORTED
     assert "gravity" in result.transitions[-1].reason
     assert np.all(result.trace["mask"] == 0)  # never took control
@@ -197,7 +198,7 @@ def test_wrong_vicon_rotation_is_refused_before_takeoff() -> None:
 @pytest.mark.parametrize("encoding", ["missing", "zero", "held-identity"])
 def test_every_loss_encoding_reads_as_no_measurement(encoding: str) -> None:
     cfg = sim_config(**{"sim.vicon.loss_encoding": encoding})
-    flight = InProcessFlight(cfg, duration_s=8.0)
+    flight = InProcessFlight(assemble(cfg), duration_s=8.0)
     result = flight.run(max_time_s=60.0, events=[(9.0, lambda f: f.lab.vicon_outage(0.8))])
     assert State.HOLD in states(result) and result.final_state is State.DONE
     est_err = np.linalg.norm(result.trace["true_pos"] - result.trace["est_pos"], axis=1)
@@ -210,13 +211,13 @@ def test_hinf_from_config_flies_only_when_designed_with_the_rate_loop() -> None:
     """Thesis Ch. 10.3 through the whole stack: the packaged gain designed on the thesis's
     model tilts over on the lagged virtual plant (the tilt failsafe lands it); the gain
     designed with the rate-loop lag hovers and lands normally."""
-    lagged = fly_in_process(sim_config(**{"controller.type": "hinf"}), duration_s=6.0,
+    lagged = fly_in_process(assemble(sim_config(**{"controller.type": "hinf"})), duration_s=6.0,
                             max_time_s=60.0)
     assert states(lagged)[:2] == [State.TAKEOFF, State.TRACK]
     assert lagged.final_state is State.DONE
     assert not any("tilt" in tr.reason for tr in lagged.transitions)
-    thesis = fly_in_process(sim_config(**{"controller.type": "hinf",
-                                          "controller.hinf.include_rate_loop": False}),
+    thesis = fly_in_process(assemble(sim_config(**{"controller.type": "hinf",
+                                          "controller.hinf.include_rate_loop": False})),
                             duration_s=6.0, max_time_s=60.0)
     land = next(tr for tr in thesis.transitions if tr.new is State.LAND)
     assert "tilt" in land.reason
@@ -224,7 +225,7 @@ def test_hinf_from_config_flies_only_when_designed_with_the_rate_loop() -> None:
 
 @pytest.mark.slow
 def test_trace_truth_is_stamped_with_its_own_time() -> None:
-    result = fly_in_process(sim_config(), duration_s=2.0, max_time_s=40.0)
+    result = fly_in_process(assemble(sim_config()), duration_s=2.0, max_time_s=40.0)
     lead = result.trace["true_t"] - result.trace["t"]
     assert lead.min() >= -1e-9 and lead.max() <= 0.0101  # at most one DATA period newer
 
@@ -276,7 +277,7 @@ def test_channels_handed_to_the_pilot_and_back_at_run_time(tmp_path: Path) -> No
 
 @pytest.mark.slow
 def test_low_battery_lands_after_its_grace_time(tmp_path: Path) -> None:
-    """Issue 14: the battery voltage the X-3D reports (STATUS) is logged, and a battery
+    """The battery voltage the X-3D reports (STATUS) is logged, and a battery
     below safety.battery_land_v for safety.battery_grace_s lands the vehicle. The virtual
     battery droops linearly here from 11.80 V by 0.15 % a second: 11.70 V at 5.6 s, after
     take-off (which starts at ~3.2 s)."""
@@ -307,7 +308,7 @@ def test_a_battery_low_for_less_than_the_grace_time_does_not_land() -> None:
             fw.params = dataclasses.replace(fw.params, battery_mv=round(1000 * volts))
         return event
 
-    flight = InProcessFlight(cfg, duration_s=6.0)
+    flight = InProcessFlight(assemble(cfg), duration_s=6.0)
     result = flight.run(max_time_s=60.0, events=[(8.0, sag(11.6)), (9.5, sag(11.8)),
                                                  (10.0, sag(11.6)), (11.9, sag(11.8))])
     assert states(result) == [State.TAKEOFF, State.TRACK, State.LAND, State.DISARM, State.DONE]

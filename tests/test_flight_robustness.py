@@ -1,4 +1,4 @@
-"""Issue 14: nothing from outside may crash, blind or silently abort a flight.
+"""Nothing from outside may crash, blind or silently abort a flight.
 
 Real-time flights of the daemon against the virtual lab over a real pty and UDP, each
 reproducing one of the hostile tester's findings and asserting that the flight goes
@@ -34,11 +34,12 @@ import pytest
 from lab_helpers import free_udp_port
 from structlog.testing import capture_logs
 
+from groundstation.app.daemon import FlightDaemon
+from groundstation.app.fly import fly_command
+from groundstation.app.recorder import read_flight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.loop.daemon import FlightDaemon
-from groundstation.loop.flight import fly_command
-from groundstation.loop.recorder import read_flight
-from groundstation.loop.supervisor import State
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import State
 from sim_device.realtime import SimDeviceProcess, SimDeviceThread
 
 REPO = Path(__file__).resolve().parents[1]
@@ -134,7 +135,7 @@ def test_object_churn_does_not_stall_the_commands(tmp_path: Path) -> None:
     sees the daemon's pauses as the real X-3D would."""
     with vehicle_process(tmp_path) as (vehicle, cfg):
         # a 3 s hover: with the take-off and the landing, 11 s of COMMANDs under the churn
-        daemon = FlightDaemon(cfg, duration_s=3.0)
+        daemon = FlightDaemon(assemble(cfg), duration_s=3.0)
         with Churn() as churn, CollectorWatch() as watch:
             summary = daemon.run()
     assert vehicle.wire is not None
@@ -243,7 +244,7 @@ def test_a_failsafe_landing_exits_1_with_a_warning(tmp_path: Path) -> None:
     cfg = lab_config(tmp_path, **{"sim.vicon.outages": [[10.0, 60.0]]})
     lines: list[str] = []
     with SimDeviceThread(cfg) as device, capture_logs() as logs:
-        code = fly_command(apply_overrides(cfg, {"serial.port": device.info.pty_path}),
+        code = fly_command(assemble(apply_overrides(cfg, {"serial.port": device.info.pty_path})),
                            duration_s=30.0, echo=lines.append)
     text = "\n".join(lines)
     assert code == 1, text
@@ -262,7 +263,7 @@ def test_a_link_failure_ends_with_a_summary_and_a_final_row(tmp_path: Path) -> N
         cfg = apply_overrides(cfg, {"serial.port": device.info.pty_path})
         result: dict[str, int] = {}
         thread = threading.Thread(target=lambda: result.setdefault(
-            "code", fly_command(cfg, duration_s=30.0, echo=lines.append)))
+            "code", fly_command(assemble(cfg), duration_s=30.0, echo=lines.append)))
         thread.start()
         try:
             wait_until(lambda: any(line.startswith("TRACK") for line in lines), 30.0,

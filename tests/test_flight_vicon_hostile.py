@@ -1,4 +1,4 @@
-"""Issue 14: nothing on the Vicon port may crash, blind or silently abort a flight.
+"""Nothing on the Vicon port may crash, blind or silently abort a flight.
 
 In-process hover flights (the virtual lab on its simulated clock, every datagram
 through the real pose filter) with a hostile sender on the Vicon port, five seconds
@@ -23,9 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.app.inprocess import FlightResult, InProcessFlight
 from groundstation.config import GroundStationConfig, apply_overrides, load_config
-from groundstation.loop.inprocess import FlightResult, InProcessFlight
-from groundstation.loop.supervisor import State
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import State
 from groundstation.vicon.decoder import ObjectPose, encode_datagram
 from groundstation.vicon.frames import FrameConversion
 from groundstation.vicon.health import ViconHealth
@@ -120,7 +121,7 @@ def garbage_frames(flight: InProcessFlight) -> Make:
 
 def fly(event: Callable[[InProcessFlight], None]) -> tuple[FlightResult, ViconHealth]:
     """Fly with ``event`` at EVENT_S; the result and the pose filter's counters."""
-    flight = InProcessFlight(sim_config(), duration_s=12.0)
+    flight = InProcessFlight(assemble(sim_config()), duration_s=12.0)
     result = flight.run(max_time_s=60.0, events=[(EVENT_S, event)])
     return result, flight.pose_filter.health(result.lab.t)
 

@@ -20,8 +20,8 @@ from lichtblick_schema import parse_json_schema
 
 from groundstation.estimation.ekf import Ekf
 from groundstation.telemetry import foxglove as fx
-from groundstation.telemetry.control import ControlStats
 from groundstation.telemetry.publisher import TelemetryPublisher
+from groundstation.telemetry.requests import RequestStats
 from groundstation.telemetry.schema import (
     TOPIC_HEALTH,
     TOPIC_STATE,
@@ -55,7 +55,7 @@ def _health_body() -> dict[str, Any]:
     """A health body as the daemon builds it, from the real parts' own health records."""
     return health_payload(link={"rate_hz": 100.0, "rejected": {"crc": 2}},
                           vicon=PoseFilter("X3D").health(0.0), estimator=Ekf().health(),
-                          loop={"ticks": 10, "commands": 5}, control=ControlStats())
+                          loop={"ticks": 10, "commands": 5}, control=RequestStats())
 
 
 def _leaves(payload: Mapping[str, Any], prefix: str = "") -> Iterator[str]:

@@ -18,11 +18,12 @@ from lab_helpers import sim_config
 from scipy.optimize import brentq
 from typer.testing import CliRunner
 
+from groundstation.app.inprocess import fly_in_process
 from groundstation.cli import app
 from groundstation.errors import IdentificationError
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import State
 from groundstation.identification.lift import thrust_from_hover_stick
-from groundstation.loop.inprocess import fly_in_process
-from groundstation.loop.supervisor import State
 
 POLY = (2.073e-10, -1.143e-6, -1.054e-3, -0.903)  # eq. 3.7 [N], body z (negative up)
 MASS, G = 0.60, 9.82
@@ -76,7 +77,7 @@ def _sag(model: list[float]) -> float:
     cfg = sim_config(**{"trajectory.name": "hover", "channels.auto": ["thrust"],
                         "vehicle.thrust_poly": model,
                         "sim.thrust_scale": TRUE_LIFT / model_scale})
-    result = fly_in_process(cfg, duration_s=4.0, max_time_s=40.0)
+    result = fly_in_process(assemble(cfg), duration_s=4.0, max_time_s=40.0)
     assert result.final_state is State.DONE, result.transitions
     climbing = result.during(State.TAKEOFF)
     return float(np.max(result.trace["true_pos"][climbing, 2]

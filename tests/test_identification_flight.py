@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from lab_helpers import fly_logged, sim_config
 
+from groundstation.app.inprocess import FlightResult
 from groundstation.control.excitation import (
     LIMIT_SHARE,
     identification_flight,
@@ -26,10 +27,10 @@ from groundstation.control.excitation import (
 )
 from groundstation.control.feasibility import FlightLimits, Volume
 from groundstation.errors import IdentificationError, TrajectoryError
+from groundstation.flight.assembly import assemble
+from groundstation.flight.prepare import prepare_trajectory
 from groundstation.identification import identify_rates, identify_scales
 from groundstation.identification.lift import identify_inflow_log, identify_thrust_log
-from groundstation.loop.assemble import flight_limits_from_config, prepare_trajectory
-from groundstation.loop.inprocess import FlightResult
 from sim_device.lab import VirtualLab
 
 G = 9.82
@@ -105,10 +106,10 @@ def test_amplitudes_shrink_with_the_room_and_a_centre_outside_is_refused() -> No
 
 def test_the_configured_flight_passes_the_check_gs_fly_runs() -> None:
     cfg = sim_config(**{"trajectory.name": "sysid", "trajectory.yaw_deg": 45.0})
-    prepared = prepare_trajectory(cfg)
+    prepared = prepare_trajectory(assemble(cfg))
     assert prepared.report.feasible, prepared.report.problems
     assert "identification flight" in prepared.description
-    limits = flight_limits_from_config(cfg)
+    limits = assemble(cfg).limits
     assert prepared.report.max_tilt_rad <= LIMIT_SHARE * limits.max_tilt_rad * 1.001
     assert prepared.report.max_yaw_rate_rad_s <= LIMIT_SHARE * limits.max_yaw_rate_rad_s * 1.001
     assert prepared.trajectory.sample(0.0).yaw == pytest.approx(math.radians(45.0))
@@ -118,8 +119,8 @@ def test_the_configured_flight_passes_the_check_gs_fly_runs() -> None:
 def flown(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, FlightResult]:
     """The identification flight on a vehicle whose gains are 30 % off (about 15 s)."""
     cfg = sim_config(**{"trajectory.name": "sysid", "sim.k_rate_scale": TRUE_OVER_MODEL})
-    return fly_logged(cfg, tmp_path_factory.mktemp("sysid"), prepare_trajectory(cfg)
-                      .duration_s)
+    return fly_logged(cfg, tmp_path_factory.mktemp("sysid"),
+                      prepare_trajectory(assemble(cfg)).duration_s)
 
 
 @pytest.mark.slow
@@ -129,7 +130,7 @@ def test_the_gains_are_found_within_5_percent_of_the_truth(
     lab = result.lab
     assert isinstance(lab, VirtualLab)
     truth = np.array(lab.params.plant.k_rate)
-    configured = np.array(result.core.config.vehicle.k_rate)
+    configured = np.array(result.core.params.vehicle.k_rate)
     np.testing.assert_allclose(truth / configured, TRUE_OVER_MODEL, rtol=1e-9)
     fit = identify_rates(log)  # as `gs identify rates LOG`: the configured gyro scale
     gains = np.array(fit.k_rate)
@@ -144,7 +145,7 @@ def test_the_gains_are_found_within_5_percent_of_the_truth(
     arrays = lab.truth_log.arrays()
     q = arrays["quaternion"]
     tilt = np.degrees(np.arccos(np.clip(1.0 - 2.0 * (q[:, 1] ** 2 + q[:, 2] ** 2), -1, 1)))
-    assert np.max(tilt) < result.core.config.safety.max_tilt_deg
+    assert np.max(tilt) < math.degrees(result.core.params.supervisor.max_tilt_rad)
     lo, hi = LAB.allowed()
     assert np.all(arrays["position"] >= lo - 0.1) and np.all(arrays["position"] <= hi + 0.1)
 

@@ -1,4 +1,4 @@
-"""`gs identify thrust|inflow LOG`: the thrust map and induced inflow from a flight (issue 17).
+"""`gs identify thrust|inflow LOG`: the thrust map and induced inflow from a flight.
 
 A virtual lab with a planted 10 % weaker thrust map than the configuration's and an
 induced inflow of -0.6 N s/m (the default is the thesis's -0.423) flies a waypoint path

@@ -1,4 +1,4 @@
-"""Rate-loop identification (issue 17 item 3) against the virtual lab with planted values.
+"""Rate-loop identification against the virtual lab with planted values.
 
 The virtual lab flies a rate loop whose gains, transport delay and time constant differ
 from the configuration's (``sim.k_rate_scale``, ``sim.command_delay_s``,
@@ -18,12 +18,12 @@ import pytest
 from lab_helpers import LIVELY_WAYPOINTS as WAYPOINTS
 from lab_helpers import fly_logged, sim_config
 
+from groundstation.app.inprocess import FlightResult
+from groundstation.app.recorder import FLIGHT_FILE, read_flight
 from groundstation.config import apply_overrides, load_config
 from groundstation.errors import GroundStationError, IdentificationError
+from groundstation.flight.supervisor import State
 from groundstation.identification import identify_rates, identify_scales
-from groundstation.loop.inprocess import FlightResult
-from groundstation.loop.recorder import FLIGHT_FILE, read_flight
-from groundstation.loop.supervisor import State
 from sim_device.lab import VirtualLab
 
 REPO = Path(__file__).resolve().parents[1]
@@ -75,7 +75,7 @@ def test_rates_recover_the_planted_gain_delay_and_time_constant(
     # lab then applies a command at its next 2 ms plant step (0-2 ms more).
     rows, _, _ = read_flight(log)
     sent = rows["t"][rows["cmd_sent"]]
-    period = result.core.config.serial.data_period_ms / 1000.0
+    period = result.core.params.link.data_period_ms / 1000.0
     runner = float(np.mean(np.ceil(sent / period - 1e-6) * period - sent))
     assert 0.0 <= runner < period
     for axis in fit.axes():

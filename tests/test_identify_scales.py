@@ -1,4 +1,4 @@
-"""IMU scale identification (issue 17 item 4) against the virtual lab with planted values.
+"""IMU scale identification against the virtual lab with planted values.
 
 The virtual lab's IMU has true scales that differ from the configured Table 6.2 ones by
 factors drawn with ``sim.scale_error`` (``ImuModel.gyro_scale_true``/``acc_scale_true``:
@@ -17,12 +17,12 @@ import pytest
 from lab_helpers import LIVELY_WAYPOINTS as WAYPOINTS
 from lab_helpers import fly_logged, sim_config
 
+from groundstation.app.inprocess import FlightResult
+from groundstation.app.recorder import FLIGHT_FILE
 from groundstation.config import apply_overrides, load_config
 from groundstation.errors import IdentificationError
+from groundstation.flight.supervisor import State
 from groundstation.identification import SCALE_AXES, identify_scales
-from groundstation.loop.inprocess import FlightResult
-from groundstation.loop.recorder import FLIGHT_FILE
-from groundstation.loop.supervisor import State
 from sim_device.lab import VirtualLab
 
 REPO = Path(__file__).resolve().parents[1]

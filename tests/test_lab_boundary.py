@@ -1,4 +1,4 @@
-"""The ground station does not depend on its virtual lab (issue 15).
+"""The ground station does not depend on its virtual lab.
 
 Dependencies run one way: ``sim_device`` imports ``groundstation``, never the reverse.
 The ground station finds the lab through the ``groundstation.labs`` entry point
@@ -21,6 +21,7 @@ import pytest
 
 from groundstation.config import load_config, validate_config
 from groundstation.errors import ConfigError
+from groundstation.flight.assembly import check_config
 from groundstation.lab import ENTRY_POINT_GROUP, Announcement, installed_labs, virtual_lab
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -111,12 +112,14 @@ def test_the_bundled_lab_is_registered() -> None:
 
 
 def test_the_lab_validates_its_section_with_field_paths() -> None:
+    """The configuration layer keeps the lab's section as given; where the configuration is
+    assembled, the lab validates it and its problems name their keys under ``sim``."""
     base = {"sim": {"seed": 3, "faults": {"drop_rate": 2.0}, "vicon": {"bogus": 1}}}
     with pytest.raises(ConfigError) as err:
-        validate_config(base, "t.yaml")
+        check_config(validate_config(base, "t.yaml"), "t.yaml")
     paths = {path for path, _, _ in err.value.problems}
     assert paths == {"sim.faults.drop_rate", "sim.vicon.bogus"}
-    config = validate_config({"sim": {"seed": 3}})
+    config = check_config(validate_config({"sim": {"seed": 3}}))
     assert type(config.sim).__name__ == "SimConfig"
     assert config.sim.model_dump()["seed"] == 3
 

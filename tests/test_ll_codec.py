@@ -1,4 +1,4 @@
-"""The AscTec LL dialect's codec against the spec's byte-exact test vectors (issue 16).
+"""The AscTec LL dialect's codec against the spec's byte-exact test vectors.
 
 Every vector of ``asctec-ll-protocol.md`` section 4 goes through the project's encoder
 and, where the project decodes that direction, back through its decoder. The vectors

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from structlog.testing import capture_logs
 
+from groundstation.app.logdir import create_flight_log, fallback_log_dirs
+from groundstation.app.recorder import read_flight
 from groundstation.errors import RecorderError
-from groundstation.loop.logdir import create_flight_log, fallback_log_dirs
-from groundstation.loop.recorder import read_flight
 
 
 @pytest.fixture

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from groundstation.control.trajectory import YawTurn
-from groundstation.loop.mission import CREEP_RAMP_S, Mission
-from groundstation.loop.supervisor import State
+from groundstation.flight.mission import CREEP_RAMP_S, Mission
+from groundstation.flight.supervisor import State
 from groundstation.types import Reference
 
 START = np.array([0.375, -0.375, -1.0])

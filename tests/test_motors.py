@@ -1,4 +1,4 @@
-"""``gs motors start|stop`` against the virtual AscTec LL vehicle over a real pty (issue 16).
+"""``gs motors start|stop`` against the virtual AscTec LL vehicle over a real pty.
 
 The gesture is sent only on this explicit request; it is refused while a flight holds the
 port, in the X-3D dialect, and while the vehicle reports it is flying. The virtual vehicle
@@ -18,6 +18,7 @@ from lab_helpers import free_udp_port
 
 from groundstation.asctec.ll_link import LlLink
 from groundstation.config import apply_overrides, dump_config, load_config
+from groundstation.flight.assembly import link_params
 from sim_device.realtime import SimDeviceProcess
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -53,7 +54,7 @@ def test_start_then_stop_on_request(ll_lab: tuple[Path, str]) -> None:
 def test_refused_while_another_process_holds_the_port(ll_lab: tuple[Path, str]) -> None:
     config_file, pty = ll_lab
     cfg = apply_overrides(load_config(config_file), {"serial.port": pty})
-    with LlLink.from_config(cfg.serial):  # a flight's link holds the port exclusively
+    with LlLink.from_params(link_params(cfg.serial)):  # a flight's link holds the port
         refused = gs("motors", "start", "--config", str(config_file), "--serial-port", pty)
     assert refused.returncode == 1
     assert "refused" in refused.stdout and "in use" in refused.stdout

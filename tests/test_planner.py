@@ -26,19 +26,19 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
-from groundstation.loop.commander import Commander, CommandRefusedError
-from groundstation.loop.planner import (
+from groundstation.app.planner_process import PLANNER_NICE, PlannerProcess
+from groundstation.app.realtime import CollectorPacer, fifo_priority
+from groundstation.flight.assembly import assemble
+from groundstation.flight.commander import Commander, CommandRefusedError
+from groundstation.flight.planner import (
     GoTo,
     InlinePlanner,
     PlanMotion,
     Planner,
     PlannerSettings,
-    settings_from_config,
 )
-from groundstation.loop.planner_process import PLANNER_NICE, PlannerProcess
-from groundstation.loop.realtime import CollectorPacer, fifo_priority
 
-SETTINGS = settings_from_config(sim_config(**{"trajectory.name": "none"}))
+SETTINGS = assemble(sim_config(**{"trajectory.name": "none"})).planner
 HOME = np.array([0.0, 0.0, -1.0])
 
 

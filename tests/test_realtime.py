@@ -14,14 +14,14 @@ from pathlib import Path
 import pytest
 from structlog.testing import capture_logs
 
-from groundstation.config import ConfigError, validate_config
-from groundstation.loop.realtime import (
+from groundstation.app.realtime import (
     CPU_DMA_LATENCY,
     CollectorPacer,
     cpu_latency_request,
     fifo_priority,
     switch_interval,
 )
+from groundstation.config import ConfigError, validate_config
 
 
 def _open_fds() -> int:
@@ -94,7 +94,7 @@ def test_config_defaults_and_errors() -> None:
 
 @pytest.mark.slow
 def test_collector_pacer_freezes_and_runs_full_collections_only_after_a_command() -> None:
-    """Issue 14 item 3: no full collection in the middle of a tick; young ones go on."""
+    """No full collection in the middle of a tick; young ones go on."""
     import gc
 
     thresholds = gc.get_threshold()
@@ -182,7 +182,7 @@ def test_fifo_priority_holds_for_the_thread_and_its_children_and_is_restored() -
 REFUSED = """
 import os, resource, sys
 from structlog.testing import capture_logs
-from groundstation.loop.realtime import fifo_priority
+from groundstation.app.realtime import fifo_priority
 resource.setrlimit(resource.RLIMIT_RTPRIO, (0, 0))
 if os.geteuid() == 0:
     os.setuid(65534)  # nobody: root's capabilities (CAP_SYS_NICE) are gone

@@ -23,16 +23,16 @@ import numpy as np
 import pytest
 
 from groundstation import __version__
-from groundstation.asctec.messages import CommandMsg
-from groundstation.errors import GroundStationError, RecorderError
-from groundstation.export import CSV_PRECISION, export_csv
-from groundstation.loop.recorder import (
+from groundstation.app.recorder import (
     COLUMN_UNITS,
     FLAT_DTYPE,
     RECORD_DTYPE,
     FlightRecorder,
     read_flight,
 )
+from groundstation.asctec.messages import CommandMsg
+from groundstation.errors import GroundStationError, RecorderError
+from groundstation.export import CSV_PRECISION, export_csv
 from groundstation.types import ImuSample, Pose, Reference, StateEstimate, Sticks
 
 CONFIG = "serial:\n  port: /dev/ttyUSB0\n"
@@ -179,7 +179,7 @@ def test_automatic_flush_keeps_at_most_one_second_in_memory(tmp_path: Path) -> N
 _KILLED_WRITER = textwrap.dedent("""
     import sys
     import numpy as np
-    from groundstation.loop.recorder import FlightRecorder
+    from groundstation.app.recorder import FlightRecorder
     sys.path.insert(0, sys.argv[2])
     from test_recorder import CONFIG, make_tick
     rng = np.random.default_rng(5)

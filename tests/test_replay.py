@@ -7,12 +7,13 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from groundstation.app.inprocess import fly_in_process
+from groundstation.app.recorder import FlightRecorder
+from groundstation.app.replay import replay_flight
 from groundstation.cli import app
 from groundstation.config import apply_overrides, dump_config, load_config
-from groundstation.loop.inprocess import fly_in_process
-from groundstation.loop.recorder import FlightRecorder
-from groundstation.loop.replay import replay_flight
-from groundstation.loop.supervisor import State
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import State
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -22,7 +23,7 @@ def recorded_flight(tmp_path: Path) -> str:
                           {"trajectory.name": "square", "sim.vicon.rate_hz": 10.0})
     with FlightRecorder.create(tmp_path, dump_config(cfg),
                                {"supervisor_states": [s.name for s in State]}) as rec:
-        result = fly_in_process(cfg, duration_s=8.0, max_time_s=60.0, recorder=rec)
+        result = fly_in_process(assemble(cfg), duration_s=8.0, max_time_s=60.0, recorder=rec)
         directory = str(rec.directory)
     assert result.final_state is State.DONE
     return directory

@@ -23,6 +23,7 @@ from lab_helpers import fly_logged, sim_config
 from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
+from groundstation.app.recorder import RECORD_DTYPE, read_flight
 from groundstation.cli import app
 from groundstation.evaluation import flight_figures
 from groundstation.evaluation.flight_figures import (
@@ -37,8 +38,7 @@ from groundstation.evaluation.flight_figures import (
     vicon_residuals,
 )
 from groundstation.evaluation.report import FlightReport, report_flight
-from groundstation.loop.recorder import RECORD_DTYPE, read_flight
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from groundstation.model.quaternion import multiply, quat_from_euler, quat_from_rotvec
 
 EXPECTED = ("flight", "position", "top_view", "attitude", "rates", "commands", "estimator",
@@ -252,7 +252,7 @@ def test_the_log_records_a_consistent_filters_nis(flown: tuple[Path, Path]) -> N
     scipy's chi2(6).median() within the spread of a sample median of this size."""
     from scipy.stats import chi2
 
-    from groundstation.loop.recorder import read_flight
+    from groundstation.app.recorder import read_flight
 
     rows, _, _ = read_flight(flown[0])
     nis = rows["vicon_nis"][(rows["state"] == int(State.TRACK)) & np.isfinite(rows["vicon_nis"])]

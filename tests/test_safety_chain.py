@@ -22,10 +22,11 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
+from groundstation.app.inprocess import FlightResult, InProcessFlight, fly_in_process
 from groundstation.config import GroundStationConfig
 from groundstation.control.trajectory import FigureEight
-from groundstation.loop.inprocess import FlightResult, InProcessFlight, fly_in_process
-from groundstation.loop.supervisor import State
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import State
 from groundstation.types import Reference
 
 TRACKED_FAR = {"sim.vicon.volume_x": [-20.0, 20.0], "sim.vicon.volume_y": [-20.0, 20.0],
@@ -58,7 +59,7 @@ def fly_fault(lift_scale: float, duration_s: float, vicon_hz: float,
     lift for ``duration_s``."""
     cfg = sim_config(**{"trajectory.name": "hover", "sim.vicon.rate_hz": vicon_hz,
                         **TRACKED_FAR, **overrides})
-    result = fly_in_process(cfg, duration_s=20.0, max_time_s=60.0, events=[
+    result = fly_in_process(assemble(cfg), duration_s=20.0, max_time_s=60.0, events=[
         (12.0, lambda f: f.lab.thrust_fault(lift_scale, duration_s))])
     return cfg, result
 
@@ -131,7 +132,7 @@ class ArmedGlitch:
 def test_a_reference_beyond_what_the_check_allowed_is_a_fault_not_an_input() -> None:
     cfg = sim_config(**{"trajectory.name": "figure-eight"})
     glitch = ArmedGlitch()
-    flight = InProcessFlight(cfg, trajectory=glitch, duration_s=20.0)
+    flight = InProcessFlight(assemble(cfg), trajectory=glitch, duration_s=20.0)
 
     def arm(_: InProcessFlight) -> None:
         glitch.armed = True
@@ -176,7 +177,7 @@ def test_the_noisy_dense_helix_that_flew_away_is_flown_on_its_curve(tmp_path: Pa
     cfg = sim_config(**{"trajectory.name": "waypoints",
                         "trajectory.file": str(helix_csv(tmp_path / "helix.csv")),
                         **TRACKED_FAR})
-    result = fly_in_process(cfg, max_time_s=60.0)
+    result = fly_in_process(assemble(cfg), max_time_s=60.0)
     assert result.final_state is State.DONE and result.success, result.transitions
     track = result.during(State.TRACK)
     error = np.linalg.norm(result.trace["true_pos"][track] - result.trace["ref_pos"][track],

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from groundstation.app.sdnotify import SdNotifier
 from groundstation.config import load_config
-from groundstation.loop.sdnotify import SdNotifier
 
 
 @pytest.fixture

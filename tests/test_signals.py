@@ -7,7 +7,7 @@ import signal
 
 import pytest
 
-from groundstation.loop.signals import STOP_SIGNALS, StopRequests, on_stop_signals
+from groundstation.app.signals import STOP_SIGNALS, StopRequests, on_stop_signals
 
 
 class FakeClock:

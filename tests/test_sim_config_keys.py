@@ -1,4 +1,4 @@
-"""Every key of the virtual lab's ``sim:`` section changes the lab (issue 15: no key that
+"""Every key of the virtual lab's ``sim:`` section changes the lab (no key that
 nothing reads).
 
 Each leaf key has a changed value below; the test requires the table to cover every

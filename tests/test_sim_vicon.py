@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from groundstation.config import load_config
 from groundstation.vicon.decoder import ViconFrame, decode_datagram, encode_datagram
-from groundstation.vicon.frames import FrameConversion
+from groundstation.vicon.frames import FrameConversion, rotation_from_euler_deg
 from sim_device import LabParams, ViconSimParams, VirtualLab
 from sim_device.params import LossEncoding
 from sim_device.vicon import foreign_stream
@@ -188,8 +188,8 @@ def test_sender_and_ground_station_agree_on_frames_from_sim_yaml(repo: object) -
     assert isinstance(frame, ViconFrame)
     obj = frame.find(config.vicon.object_name)
     assert obj is not None
-    conv = FrameConversion.create(config.vicon.world_to_ned.as_matrix(),
-                                  config.vicon.body_to_object.as_matrix())
+    conv = FrameConversion.create(rotation_from_euler_deg(config.vicon.world_to_ned.euler_xyz_deg),
+                                  rotation_from_euler_deg(config.vicon.body_to_object.euler_xyz_deg))
     p, q_back = conv.to_ned(obj.translation, obj.rotation)
     np.testing.assert_allclose(p, [0.3, 0.4, -0.9], atol=1e-12)
     np.testing.assert_allclose(q_back, q * math.copysign(1.0, q[0]), atol=1e-12)

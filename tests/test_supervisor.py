@@ -8,7 +8,7 @@ import math
 import pytest
 from structlog.testing import capture_logs
 
-from groundstation.loop.supervisor import (
+from groundstation.flight.supervisor import (
     Observation,
     Outcome,
     State,
@@ -281,10 +281,10 @@ def test_a_takeoff_that_does_not_complete_lands_after_the_timeout() -> None:
 
 def test_the_takeoff_timeout_comes_from_the_configuration() -> None:
     from groundstation.config import validate_config
-    from groundstation.loop.core import limits_from_config
+    from groundstation.flight.assembly import supervisor_limits
 
     cfg = validate_config({"safety": {"takeoff_timeout_s": 7.5}})
-    assert limits_from_config(cfg).takeoff_timeout_s == 7.5
+    assert supervisor_limits(cfg).takeoff_timeout_s == 7.5
 
 
 def test_outcome_completed_stopped_and_failsafe() -> None:
@@ -311,7 +311,7 @@ def test_outcome_completed_stopped_and_failsafe() -> None:
     {"vicon_age_s": 5.0},  # Vicon lost 5 s
 ])
 def test_a_failsafe_landing_is_not_a_normal_end(change: dict[str, object]) -> None:
-    """Issue 14 item 5: these landings ended in DONE and counted as a normal end (exit 0)."""
+    """These landings ended in DONE and counted as a normal end (exit 0)."""
     sup = Supervisor()
     t = airborne(sup)
     with capture_logs() as logs:
@@ -397,7 +397,7 @@ def test_force_ends_the_flight_as_a_failsafe() -> None:
 
 def test_transition_kinds_decide_what_a_report_explains() -> None:
     """The report shows the reason of every transition that is not a step of a nominal
-    flight, from the supervisor's transition kinds (issue 15), not from its wording."""
+    flight, from the supervisor's transition kinds, not from its wording."""
     from groundstation.evaluation.report import states_line
 
     nominal = Supervisor()

@@ -15,10 +15,11 @@ import zmq
 
 from groundstation.config import TelemetryConfig
 from groundstation.errors import GroundStationError
+from groundstation.flight.assembly import publisher_params
 from groundstation.telemetry import (
     SCHEMA_VERSION,
-    TelemetryClient,
     TelemetryPublisher,
+    TelemetrySubscriber,
     health_payload,
     state_payload,
 )
@@ -57,7 +58,7 @@ def pub() -> Iterator[TelemetryPublisher]:
         yield publisher
 
 
-def join(pub: TelemetryPublisher, client: TelemetryClient) -> dict[str, dict[str, Any]]:
+def join(pub: TelemetryPublisher, client: TelemetrySubscriber) -> dict[str, dict[str, Any]]:
     """Slow-joiner handshake: publish until the client has one message of each topic
     (bounded: 300 rounds of 10 ms), return the last payload per topic."""
     got: dict[str, dict[str, Any]] = {}
@@ -73,7 +74,7 @@ def join(pub: TelemetryPublisher, client: TelemetryClient) -> dict[str, dict[str
 
 def test_round_trip_and_schema(pub: TelemetryPublisher) -> None:
     assert pub.endpoint is not None and pub.endpoint.startswith("tcp://127.0.0.1:")
-    with TelemetryClient(pub.endpoint) as client:
+    with TelemetrySubscriber(pub.endpoint) as client:
         got = join(pub, client)
     state, health = got["state"], got["health"]
     for topic, payload in got.items():
@@ -95,7 +96,7 @@ def test_round_trip_and_schema(pub: TelemetryPublisher) -> None:
 
 
 def test_messages_are_strict_json(pub: TelemetryPublisher) -> None:
-    with zmq.Context() as ctx:  # read the raw frames, not through TelemetryClient
+    with zmq.Context() as ctx:  # read the raw frames, not through TelemetrySubscriber
         sub = ctx.socket(zmq.SUB)
         try:
             sub.setsockopt(zmq.LINGER, 0)
@@ -118,7 +119,7 @@ def test_messages_are_strict_json(pub: TelemetryPublisher) -> None:
 
 
 def test_topic_filter(pub: TelemetryPublisher) -> None:
-    with TelemetryClient(pub.endpoint or "", topics=["health"]) as client:
+    with TelemetrySubscriber(pub.endpoint or "", topics=["health"]) as client:
         for k in range(300):
             pub.publish("state", snapshot()["state"], t=float(k))
             pub.publish("health", snapshot()["health"], t=float(k))
@@ -168,7 +169,7 @@ def test_publishing_without_subscriber_never_blocks(pub: TelemetryPublisher) -> 
 
 @pytest.mark.slow
 def test_stuck_subscriber_drops_and_counts(pub: TelemetryPublisher) -> None:
-    with TelemetryClient(pub.endpoint or "", rcvhwm=10) as client:
+    with TelemetrySubscriber(pub.endpoint or "", rcvhwm=10) as client:
         join(pub, client)  # connected and subscribed; from now on the client never reads
         sent_before = pub.sent
         big = {**snapshot()["state"], "pad": "x" * 4096}
@@ -201,9 +202,10 @@ def test_close_releases_the_port_and_context() -> None:
 
 
 def test_disabled_publisher_and_config() -> None:
-    with TelemetryPublisher.from_config(TelemetryConfig(enabled=False)) as pub:
+    with TelemetryPublisher.from_params(publisher_params(TelemetryConfig(enabled=False))) as pub:
         assert not pub.enabled and not pub.maybe_publish(0.0, snapshot)
-    with TelemetryPublisher.from_config(TelemetryConfig(endpoint=ANY_PORT, rate_hz=5.0)) as pub:
+    enabled = publisher_params(TelemetryConfig(endpoint=ANY_PORT, rate_hz=5.0))
+    with TelemetryPublisher.from_params(enabled) as pub:
         assert pub.enabled
         assert [pub.maybe_publish(t, dict) for t in (0.0, 0.1, 0.19, 0.2)] == [
             True, False, False, True]  # 5 Hz: every 0.2 s
@@ -215,7 +217,7 @@ def test_client_skips_malformed_messages() -> None:
         try:
             raw.setsockopt(zmq.LINGER, 0)
             port = raw.bind_to_random_port("tcp://127.0.0.1")
-            with TelemetryClient(f"tcp://127.0.0.1:{port}", context=ctx) as client:
+            with TelemetrySubscriber(f"tcp://127.0.0.1:{port}", context=ctx) as client:
                 good = [b"state", json.dumps({"schema": 1, "seq": 1}).encode()]
                 for _ in range(300):
                     raw.send_multipart(good)

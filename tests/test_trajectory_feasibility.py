@@ -18,7 +18,8 @@ from groundstation.control import (
 )
 from groundstation.control.shaping import TimeWarp
 from groundstation.errors import TrajectoryError
-from groundstation.loop.assemble import trajectory_for_flight
+from groundstation.flight.assembly import assemble
+from groundstation.flight.prepare import trajectory_for_flight
 from groundstation.model import QuadrotorParams, ThrustMap
 
 
@@ -102,7 +103,7 @@ def config(**trajectory: object) -> GroundStationConfig:
 
 def refusal(cfg: GroundStationConfig) -> str:
     with pytest.raises(TrajectoryError) as info:
-        trajectory_for_flight(cfg)
+        trajectory_for_flight(assemble(cfg))
     return str(info.value)
 
 
@@ -110,18 +111,19 @@ def refusal(cfg: GroundStationConfig) -> str:
 def test_every_named_trajectory_is_shaped_and_passes_with_the_defaults() -> None:
     for name in ("hover", "step-x", "step-y", "step-z", "square", "yz-rectangle", "low-hover",
                  "figure-eight", "yaw-turn"):
-        traj, duration = trajectory_for_flight(config(name=name))
+        traj, duration = trajectory_for_flight(assemble(config(name=name)))
         report = check_feasibility(traj, FlightLimits(), horizon_s=duration)
         if name not in ("step-x", "step-y", "step-z"):  # a step is the test: left alone
             assert report.velocity_jumps == [] and report.position_jumps == [], name
     # shaping none keeps the thesis's raw square (sharp corners)
-    raw, duration = trajectory_for_flight(config(name="square", shaping="none"))
+    raw, duration = trajectory_for_flight(assemble(config(name="square", shaping="none")))
     assert isinstance(raw, PiecewiseLinear) and duration == 20.0
     assert len(check_feasibility(raw, FlightLimits()).velocity_jumps) == 4
 
 
 def test_the_issues_fast_eight_is_eased_and_flyable() -> None:
-    traj, duration = trajectory_for_flight(config(name="figure-eight", size_m=1.2, period_s=8.0))
+    fast = config(name="figure-eight", size_m=1.2, period_s=8.0)
+    traj, duration = trajectory_for_flight(assemble(fast))
     assert isinstance(traj, TimeWarp) and duration == pytest.approx(8.0 + traj.ramp_s)
     report = check_feasibility(traj, FlightLimits(), horizon_s=duration)
     assert report.feasible and report.velocity_jumps == []
@@ -144,7 +146,7 @@ def test_a_start_above_the_ceiling_is_refused_and_the_floor_has_no_margin() -> N
     assert ("at t = 0.00 s, (0.00, 0.00, -1.95) m: the start height 1.95 m is above the "
             "ceiling: z = -1.95 m is outside safety.volume_z [-2.00, 0.05] less the 0.10 m "
             "margin") in msg
-    trajectory_for_flight(config(name="low-hover"))  # 2 cm above the floor is allowed
+    trajectory_for_flight(assemble(config(name="low-hover")))  # 2 cm above the floor is allowed
 
 
 def test_too_much_tilt_and_too_fast_a_turn_are_refused_by_name() -> None:
@@ -156,7 +158,7 @@ def test_too_much_tilt_and_too_fast_a_turn_are_refused_by_name() -> None:
     msg = refusal(config(name="yaw-turn", yaw_turn_deg=360.0, period_s=5.0))
     assert ("at t = 2.50 s, (0.00, 0.00, -1.00) m: needs a yaw rate of 135.0 deg/s, "
             "safety.max_yaw_rate_deg_s = 90.0 deg/s") in msg
-    trajectory_for_flight(config(name="yaw-turn", yaw_turn_deg=360.0, period_s=8.0))  # 84
+    trajectory_for_flight(assemble(config(name="yaw-turn", yaw_turn_deg=360.0, period_s=8.0)))  # 84
 
 
 def test_a_missing_waypoint_file_is_refused(tmp_path: Path) -> None:

@@ -25,7 +25,8 @@ from groundstation.control.shaping import MinJerkPath, TimeWarp, fit_if_dense, s
 from groundstation.control.splines import FittedPath
 from groundstation.control.trajectories import load_trajectory_file, load_waypoints
 from groundstation.errors import TrajectoryError
-from groundstation.loop.assemble import trajectory_for_flight
+from groundstation.flight.assembly import assemble
+from groundstation.flight.prepare import trajectory_for_flight
 
 DATA = Path(__file__).resolve().parent / "data"
 G = 9.82
@@ -144,7 +145,7 @@ def test_a_file_that_ends_mid_motion_is_eased_not_refused(tmp_path: Path, shapin
     path = dense_eight(tmp_path, period, 50.0, laps=0.7)  # ends on a lobe, moving
     cfg = validate_config({"trajectory": {"name": "waypoints", "file": str(path),
                                           "shaping": shaping}})
-    traj, duration = trajectory_for_flight(cfg)
+    traj, duration = trajectory_for_flight(assemble(cfg))
     assert isinstance(traj, TimeWarp)
     assert duration == pytest.approx(0.7 * period + traj.ramp_s, abs=0.02)
     for t in (0.0, duration):
@@ -257,7 +258,7 @@ def test_the_crazyflie_figure8_is_read_and_checked_exactly() -> None:
     cfg = validate_config({"trajectory": {"name": "waypoints",
                                           "file": str(DATA / "figure8.csv"),
                                           "center": [0.2, 0.1, -1.3]}})
-    traj, duration = trajectory_for_flight(cfg)
+    traj, duration = trajectory_for_flight(assemble(cfg))
     assert isinstance(traj, PiecewisePolynomial) and duration == pytest.approx(7.283185)
     p, v, acc = _figure8_by_numpy()
     report = check_feasibility(traj, FlightLimits(), horizon_s=duration)

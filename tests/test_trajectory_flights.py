@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
+from groundstation.app.inprocess import fly_in_process
 from groundstation.evaluation.record import align_truth
-from groundstation.loop.inprocess import fly_in_process
-from groundstation.loop.supervisor import State
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import State
 
 FIGURE8 = Path(__file__).resolve().parent / "data" / "figure8.csv"
 
@@ -33,7 +34,7 @@ def eight_csv(path: Path, period: float, hz: float = 50.0) -> Path:
 def tracking_rms(file: Path) -> tuple[float, float]:
     """(RMS [m], tracked seconds) of truth minus reference over TRACK for ``file``."""
     cfg = sim_config(**{"trajectory.name": "waypoints", "trajectory.file": str(file)})
-    result = fly_in_process(cfg, max_time_s=60.0)
+    result = fly_in_process(assemble(cfg), max_time_s=60.0)
     assert result.final_state is State.DONE, result.transitions
     trace = result.trace
     log = result.lab.truth_log.arrays()

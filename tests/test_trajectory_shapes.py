@@ -16,14 +16,15 @@ from groundstation.control import (
     Hover,
     PiecewiseLinear,
     Trajectory,
+    build_trajectory,
     make_trajectory,
     square,
-    trajectory_from_config,
 )
 from groundstation.control.shaping import MinJerkPath, TimeWarp, min_jerk_path, shape_for_flight
 from groundstation.control.trajectories import TRAJECTORY_NAMES, load_waypoints
 from groundstation.control.trajectory import YawTurn
 from groundstation.errors import TrajectoryError
+from groundstation.flight.assembly import trajectory_spec
 
 
 def _fd(traj, t: float, h: float = 1e-5) -> tuple[np.ndarray, np.ndarray]:
@@ -111,7 +112,7 @@ def test_every_config_name_builds(tmp_path: Path) -> None:
         traj = make_trajectory(name, file=csv)
         assert traj.sample(1.0).position.shape == (3,)
     cfg = TrajectoryConfig(name="square", size_m=0.5, period_s=10.0)
-    sq = trajectory_from_config(cfg)
+    sq = build_trajectory(trajectory_spec(cfg))
     assert sq.duration == 10.0
     np.testing.assert_allclose(sq.sample(0).position, [0.25, -0.25, -1])
     with pytest.raises(TrajectoryError, match="unknown trajectory 'circle'"):
@@ -323,9 +324,9 @@ def test_heading_is_free_unless_given() -> None:
         fixed = make_trajectory(name, yaw=1.0)
         assert not fixed.free_heading and fixed.sample(0.0).yaw == pytest.approx(1.0), name
     cfg = TrajectoryConfig(name="square", yaw_deg=90.0)
-    sq = trajectory_from_config(cfg)
+    sq = build_trajectory(trajectory_spec(cfg))
     assert not sq.free_heading and sq.sample(3.0).yaw == pytest.approx(math.pi / 2)
-    assert trajectory_from_config(TrajectoryConfig(name="square")).free_heading
+    assert build_trajectory(trajectory_spec(TrajectoryConfig(name="square"))).free_heading
 
 
 def test_a_waypoint_yaw_column_is_absolute_and_without_one_yaw_deg_applies(
@@ -333,18 +334,19 @@ def test_a_waypoint_yaw_column_is_absolute_and_without_one_yaw_deg_applies(
     with_yaw, without = tmp_path / "a.csv", tmp_path / "b.csv"
     with_yaw.write_text("0,0,0,-1,0.5\n2,1,0,-1,0.5\n")
     without.write_text("0,0,0,-1\n2,1,0,-1\n")
-    a = trajectory_from_config(TrajectoryConfig(name="waypoints", file=with_yaw))
+    a = build_trajectory(trajectory_spec(TrajectoryConfig(name="waypoints", file=with_yaw)))
     assert not a.free_heading and a.sample(1.0).yaw == pytest.approx(0.5)
-    b = trajectory_from_config(TrajectoryConfig(name="waypoints", file=without))
+    b = build_trajectory(trajectory_spec(TrajectoryConfig(name="waypoints", file=without)))
     assert b.free_heading
-    c = trajectory_from_config(TrajectoryConfig(name="waypoints", file=without, yaw_deg=-45.0))
+    c = build_trajectory(trajectory_spec(TrajectoryConfig(name="waypoints", file=without,
+                                                          yaw_deg=-45.0)))
     assert not c.free_heading and c.sample(1.0).yaw == pytest.approx(-math.pi / 4)
 
 
 def test_yaw_turn_holds_the_centre_and_turns_with_a_min_jerk_profile() -> None:
     cfg = TrajectoryConfig(name="yaw-turn", yaw_turn_deg=270.0, period_s=12.0,
                            center=[0.2, -0.1, -1.2])
-    turn = trajectory_from_config(cfg)
+    turn = build_trajectory(trajectory_spec(cfg))
     assert turn.free_heading and turn.duration == 12.0 and not turn.periodic
     for t in (0.0, 3.0, 6.0, 9.5, 12.0, 15.0):
         ref = turn.sample(t)
@@ -353,7 +355,7 @@ def test_yaw_turn_holds_the_centre_and_turns_with_a_min_jerk_profile() -> None:
         x = min(t / 12.0, 1.0)
         assert math.degrees(ref.yaw) == pytest.approx(270.0 * quintic_smoothstep(x))
     assert math.degrees(turn.sample(6.0).yaw_rate) == pytest.approx(1.875 * 270 / 12)
-    start = trajectory_from_config(cfg.model_copy(update={"yaw_deg": 30.0}))
+    start = build_trajectory(trajectory_spec(cfg.model_copy(update={"yaw_deg": 30.0})))
     assert not start.free_heading
     assert math.degrees(start.sample(0.0).yaw) == pytest.approx(30.0)
     assert math.degrees(start.sample(12.0).yaw) == pytest.approx(300.0)

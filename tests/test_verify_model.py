@@ -1,4 +1,4 @@
-"""`gs verify-model LOG` (thesis Ch. 5) on flights in the virtual lab (issue 17).
+"""`gs verify-model LOG` (thesis Ch. 5) on flights in the virtual lab.
 
 The virtual vehicle flies the model's physics plus what the model leaves out (the rate
 loop's lag, the command delay, motor lag, battery droop), so on a flight of the nominal

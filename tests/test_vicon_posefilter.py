@@ -358,10 +358,11 @@ def test_empty_name_is_refused() -> None:
 def test_from_lab_config() -> None:
     # config/lab.yaml: Rx(180 deg) for both rotations, 8 Hz minimum, 100 Hz expected.
     from groundstation.config import load_config
+    from groundstation.flight.assembly import vicon_params
 
     lab = load_config("config/lab.yaml")
     cfg = lab.vicon
-    f = PoseFilter.from_config(cfg, lab.safety)
+    f = PoseFilter.from_params(vicon_params(cfg, lab.safety).filter)
     assert f.object_name == cfg.object_name
     np.testing.assert_allclose(f.frames.world_to_ned, np.diag([1.0, -1.0, -1.0]), atol=1e-15)
     np.testing.assert_allclose(f.frames.body_to_object, np.diag([1.0, -1.0, -1.0]), atol=1e-15)
@@ -383,8 +384,9 @@ def test_from_lab_config() -> None:
 
 def test_default_volume_is_the_configured_one() -> None:
     from groundstation.config import SafetyConfig, ViconConfig
+    from groundstation.flight.assembly import plausible_volume
 
-    assert ViconConfig().plausible_volume(SafetyConfig()) == DEFAULT_VOLUME
+    assert plausible_volume(ViconConfig(), SafetyConfig()) == DEFAULT_VOLUME
     assert PoseFilter(NAME).plausibility.volume == DEFAULT_VOLUME
     with pytest.raises(ConfigError):
         PoseFilter(NAME, plausible_volume=((0.0, 0.0), (-1.0, 1.0), (-1.0, 1.0)))
@@ -405,7 +407,7 @@ def test_rate_and_age_is_the_health_subset() -> None:
     assert rate == pytest.approx(28.0) and age == pytest.approx(0.11)  # 2 to confirm
 
 
-# --- hostile input (issue 14) ---------------------------------------------------------
+# --- hostile input ---------------------------------------------------------
 
 
 ABSURD = [
@@ -424,7 +426,7 @@ ABSURD = [
 @pytest.mark.filterwarnings("error::RuntimeWarning")
 @pytest.mark.parametrize("bad", ABSURD, ids=lambda o: f"{o.translation}-{o.rotation}")
 def test_implausible_values_are_refused_after_a_gap_and_at_start_up(bad: ObjectPose) -> None:
-    """Issue 14: a Vicon gap of 1.5 s, then 99 datagrams of an absurd pose of the tracked
+    """A Vicon gap of 1.5 s, then 99 datagrams of an absurd pose of the tracked
     object. None is accepted (the old gate re-anchored on any pose after 0.5 s), none warns,
     and the real stream is taken again once it returns."""
     f = PoseFilter(NAME)
@@ -441,7 +443,7 @@ def test_implausible_values_are_refused_after_a_gap_and_at_start_up(bad: ObjectP
 
 
 def test_a_single_pose_after_a_gap_is_never_taken() -> None:
-    """Issue 14: after a gap, one pose (even one within the speed limit) is not enough;
+    """After a gap, one pose (even one within the speed limit) is not enough;
     ``reanchor_poses`` (3) consecutive consistent ones are."""
     f = PoseFilter(NAME, reanchor_poses=3)
     t = started(f) + 1.5
@@ -484,7 +486,7 @@ def test_a_second_consistent_stream_is_a_rival_and_never_blinds() -> None:
 
 
 def test_foreign_items_and_poseless_datagrams_never_touch_the_frame_numbers() -> None:
-    """Issue 14: another object's items, datagrams without a usable pose of ours and absurd
+    """Another object's items, datagrams without a usable pose of ours and absurd
     poses of ours, all 500 frames ahead, beside the real stream: the real stream is never
     taken for duplicates or reordered datagrams (the old bookkeeping dropped it for 5 s)."""
     f = PoseFilter(NAME)
@@ -507,7 +509,7 @@ def test_foreign_items_and_poseless_datagrams_never_touch_the_frame_numbers() ->
 
 
 def test_garbage_frame_numbers_neither_inflate_counters_nor_blind() -> None:
-    """Issue 14: the tracked object's (plausible) pose with garbage frame numbers: near
+    """The tracked object's (plausible) pose with garbage frame numbers: near
     2**32, and 500 ahead. A jump that no elapsed time explains is a restart (or garbage),
     never billions of dropped frames, and the real stream goes on within a few frames."""
     f = PoseFilter(NAME)

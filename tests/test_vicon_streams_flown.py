@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from lab_helpers import sim_config
 
-from groundstation.loop.inprocess import FlightResult, InProcessFlight, fly_in_process
-from groundstation.loop.supervisor import State
+from groundstation.app.inprocess import FlightResult, InProcessFlight, fly_in_process
+from groundstation.flight.assembly import assemble
+from groundstation.flight.supervisor import State
 from groundstation.vicon.decoder import ObjectPose, encode_datagram
 from groundstation.vicon.frames import FrameConversion
 from sim_device.vicon import foreign_stream
@@ -36,7 +37,7 @@ def test_a_sender_with_exact_angles_flies(rate_hz: float, limit_m: float) -> Non
     cfg = sim_config(**{"trajectory.name": "hover", "sim.vicon.rate_hz": rate_hz,
                         "sim.vicon.angle_noise": False,
                         **(SLOW_VICON if rate_hz < 8.0 else {})})
-    flight = InProcessFlight(cfg, duration_s=10.0)
+    flight = InProcessFlight(assemble(cfg), duration_s=10.0)
     result = flight.run(max_time_s=60.0)
     assert [tr.new for tr in result.transitions] == [
         State.TAKEOFF, State.TRACK, State.LAND, State.DISARM, State.DONE]
@@ -52,7 +53,7 @@ def test_a_stream_that_starts_while_the_object_is_occluded_flies_once_it_is_seen
     come."""
     cfg = sim_config(**{"trajectory.name": "hover", "sim.vicon.outages": [[0.0, 4.0]],
                         "sim.vicon.loss_encoding": "held-identity"})
-    flight = InProcessFlight(cfg, duration_s=5.0)
+    flight = InProcessFlight(assemble(cfg), duration_s=5.0)
     result = flight.run(max_time_s=60.0)
     takeoff = result.transitions[0]
     assert takeoff.new is State.TAKEOFF and 4.0 < takeoff.t < 8.0
@@ -67,7 +68,7 @@ def test_a_vicon_preflight_failure_says_what_the_filter_saw() -> None:
     what arrived and why it was refused, not 'Vicon at 0 Hz' alone."""
     cfg = sim_config(**{"trajectory.name": "hover", "sim.vicon.outages": [[0.0, 60.0]],
                         "sim.vicon.loss_encoding": "held-identity"})
-    result = fly_in_process(cfg, duration_s=5.0, max_time_s=30.0)
+    result = fly_in_process(assemble(cfg), duration_s=5.0, max_time_s=30.0)
     assert result.final_state is State.ABORTED
     reason = result.transitions[-1].reason
     assert "datagrams, 0 poses of 'X3D' passed" in reason and "lost tracking" in reason, reason
@@ -93,7 +94,7 @@ def test_a_second_sender_of_our_object_lands_the_flight() -> None:
             flight.lab.t + 0.004, 3.0, 100.0,
             lambda k, t: encode_datagram(10_000 + k, [items[k]])))
 
-    flight = InProcessFlight(cfg, duration_s=12.0)
+    flight = InProcessFlight(assemble(cfg), duration_s=12.0)
     result = flight.run(max_time_s=60.0, events=[(12.0, forge)])
     land = next(tr for tr in result.transitions if tr.new is State.LAND)
     assert land.failsafe and "second Vicon pose stream" in land.reason

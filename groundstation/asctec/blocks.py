@@ -2,9 +2,9 @@
 
 A DATA payload is a 4-byte header (sample counter, block mask) followed by one
 block per set mask bit, in bit order. :data:`SENSOR_BLOCKS` is the single table
-of block name, mask bit and size; configuration names blocks by these names
-("status", "gyro", "acc", "pressure", "rc") and :func:`sensor_mask` turns the
-names into the mask sent in CONFIG.
+of block name, mask bit and size; the names and their order are
+:data:`groundstation.types.SENSOR_BLOCK_NAMES` (the configuration names blocks by
+them) and :func:`sensor_mask` turns the names into the mask sent in CONFIG.
 
 Raw values stay in wire units here (ADC counts, mV, RC units); scaling to SI is
 the model's job (``model/`` sensor scaling).
@@ -18,14 +18,14 @@ from dataclasses import dataclass
 from typing import ClassVar, Final
 
 from groundstation.errors import ProtocolError
-from groundstation.types import Sticks
+from groundstation.types import SENSOR_BLOCK_NAMES, SensorBlockName, Sticks
 
 
 @dataclass(frozen=True, slots=True)
 class SensorBlock:
     """One row of the DATA block table: ``name``, mask ``bit`` (0..4), ``size`` [bytes]."""
 
-    name: str
+    name: SensorBlockName
     bit: int
     size: int
 
@@ -35,13 +35,12 @@ class SensorBlock:
         return 1 << self.bit
 
 
-SENSOR_BLOCKS: Final[tuple[SensorBlock, ...]] = (
-    SensorBlock("status", 0, 4),
-    SensorBlock("gyro", 1, 6),
-    SensorBlock("acc", 2, 6),
-    SensorBlock("pressure", 3, 4),
-    SensorBlock("rc", 4, 10),
-)
+_BLOCK_SIZES: Final = (4, 6, 6, 4, 10)
+"""Bytes of status, gyro, acc, pressure and rc (spec section 3.3), in bit order."""
+
+SENSOR_BLOCKS: Final[tuple[SensorBlock, ...]] = tuple(
+    SensorBlock(name, bit, size)
+    for bit, (name, size) in enumerate(zip(SENSOR_BLOCK_NAMES, _BLOCK_SIZES, strict=True)))
 """The DATA blocks in wire (bit) order, spec section 3.3."""
 
 BLOCKS_BY_NAME: Final[dict[str, SensorBlock]] = {b.name: b for b in SENSOR_BLOCKS}

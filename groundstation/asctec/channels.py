@@ -22,17 +22,15 @@ from typing import Final
 
 from groundstation.asctec.messages import (
     CHANNEL_BITS,
-    CHANNELS,
     STICK_MAX,
     STICK_MIN,
     THRUST_MAX,
     THRUST_MIN,
-    Channel,
     CommandMsg,
     channel_mask,
 )
 from groundstation.errors import ConfigError
-from groundstation.types import Sticks
+from groundstation.types import CHANNELS, Channel, Sticks
 
 _LIMITS: Final[dict[Channel, tuple[int, int]]] = {
     "pitch": (STICK_MIN, STICK_MAX),

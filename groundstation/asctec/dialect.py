@@ -11,18 +11,20 @@ sees the same IMU sample and vehicle status from either.
 from __future__ import annotations
 
 from types import TracebackType
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol, get_args
 
+from groundstation.asctec.blocks import DATA_SIZE_BY_MASK
+from groundstation.asctec.decoder import FRAME_OVERHEAD
 from groundstation.asctec.link import ReceivedData, SerialLink
+from groundstation.asctec.ll import COMMAND_SIZE, ImuRawData
 from groundstation.asctec.ll_link import LlLink
-from groundstation.asctec.messages import Message
+from groundstation.asctec.messages import CommandMsg, Message
+from groundstation.asctec.params import LinkParams
 from groundstation.asctec.stats import LinkStats
 from groundstation.errors import LinkError
+from groundstation.types import Dialect
 
-if TYPE_CHECKING:
-    from groundstation.config import SerialConfig
-
-DIALECTS = ("x3d", "asctec-ll")
+DIALECTS: tuple[Dialect, ...] = get_args(Dialect)
 """The ``serial.protocol`` values."""
 
 
@@ -92,9 +94,23 @@ class VehicleLink(Protocol):
                  tb: TracebackType | None) -> None: ...
 
 
-def open_link(config: SerialConfig) -> VehicleLink:
+def open_link(params: LinkParams) -> VehicleLink:
     """Open the link of the configured dialect (``serial.protocol``); LinkError if the port
     cannot be opened."""
-    if config.protocol == "asctec-ll":
-        return LlLink.from_config(config)
-    return SerialLink.from_config(config)
+    if params.protocol == "asctec-ll":
+        return LlLink.from_params(params)
+    return SerialLink.from_params(params)
+
+
+def wire_time_s(params: LinkParams) -> float:
+    """Time [s] one DATA frame (of the configured blocks) and one COMMAND frame spend on
+    the serial wire at the configured baud: 10 bits per byte (8N1), frame = N + 11
+    bytes (spec sections 1 and 3); in the AscTec LL dialect an IMU_RAWDATA frame (39
+    bytes) and a 17-byte command."""
+    if params.protocol == "asctec-ll":  # IMU_RAWDATA frame, unframed `>*>di` command
+        data_bytes = max(ImuRawData.PAYLOAD_SIZES) + FRAME_OVERHEAD
+        command_bytes = COMMAND_SIZE
+    else:
+        data_bytes = DATA_SIZE_BY_MASK[params.sensor_mask] + FRAME_OVERHEAD
+        command_bytes = max(CommandMsg.PAYLOAD_SIZES) + FRAME_OVERHEAD
+    return 10.0 * (data_bytes + command_bytes) / params.baud

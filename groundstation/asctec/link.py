@@ -31,7 +31,7 @@ import time
 from collections import deque
 from dataclasses import dataclass
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, Self
+from typing import Any, Self
 
 import serial
 import structlog
@@ -40,11 +40,9 @@ from groundstation.asctec.crc import DEFAULT_PROFILE, profile_init
 from groundstation.asctec.decoder import StreamDecoder, encode_frame
 from groundstation.asctec.keepalive import GAP_WARNING_S, CommandSchedule
 from groundstation.asctec.messages import CommandMsg, ConfigMsg, DataMsg, Message
+from groundstation.asctec.params import LinkParams
 from groundstation.asctec.stats import DataStreamMonitor, LinkStats
 from groundstation.errors import ConfigError, LinkError
-
-if TYPE_CHECKING:
-    from groundstation.config import SerialConfig
 
 _log = structlog.get_logger("groundstation.asctec")
 
@@ -251,8 +249,9 @@ class SerialLink(PortLink):
         self._start_reader()
 
     @classmethod
-    def from_config(cls, config: SerialConfig) -> SerialLink:
-        """A link built from the ``serial`` section of the configuration.
+    def from_params(cls, params: LinkParams) -> SerialLink:
+        """A link to the X-3D as ``params`` describe it (the DATA stream it starts: its
+        sensor mask at its period).
 
         The loop sends its COMMANDs on the DATA frames it receives, so they jitter with
         the DATA stream; the keep-alive fills in only when the loop has missed a whole
@@ -260,16 +259,16 @@ class SerialLink(PortLink):
         then exceed half the watchdog). Without the slack it raced the loop and wrote a
         copy of the loop's command just before the loop's own: 60 of 820 COMMANDs in a
         `gs fly --demo` flight, each a late COMMAND as the vehicle sees it."""
-        period = 1.0 / config.command_rate_hz
-        slack = max(0.0, min(config.data_period_ms / 1000.0, GAP_WARNING_S - period))
+        period = 1.0 / params.command_rate_hz
+        slack = max(0.0, min(params.data_period_ms / 1000.0, GAP_WARNING_S - period))
         return cls(
-            config.port,
-            baudrate=config.baud,
-            profile=config.crc_profile,
-            command_rate=config.command_rate_hz,
+            params.port,
+            baudrate=params.baud,
+            profile=params.crc_profile,
+            command_rate=params.command_rate_hz,
             keepalive_slack=slack,
-            stale_after=config.stale_command_s,
-            stream=ConfigMsg(config.sensor_mask, config.data_period_ms),
+            stale_after=params.stale_command_s,
+            stream=ConfigMsg(params.sensor_mask, params.data_period_ms),
         )
 
     # --- user API -----------------------------------------------------------------

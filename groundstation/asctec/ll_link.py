@@ -34,7 +34,6 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import structlog
 
@@ -54,11 +53,9 @@ from groundstation.asctec.ll import (
     encode_poll,
 )
 from groundstation.asctec.messages import CommandMsg, DataMsg, Message
+from groundstation.asctec.params import LinkParams
 from groundstation.asctec.stats import DataStreamMonitor, LinkStats
 from groundstation.errors import ConfigError, LinkError
-
-if TYPE_CHECKING:
-    from groundstation.config import SerialConfig
 
 _log = structlog.get_logger("groundstation.asctec")
 
@@ -262,18 +259,17 @@ class LlLink(PortLink):
         self._writer.start()
 
     @classmethod
-    def from_config(cls, config: SerialConfig) -> LlLink:
-        """A link built from the ``serial`` section (``protocol: asctec-ll``)."""
-        ll = config.ll
-        period = 1.0 / config.command_rate_hz
-        fallback = ll.fallback_ms / 1000.0
-        slack = max(0.0, min(config.data_period_ms / 1000.0, fallback / 2 - period))
-        return cls(config.port, baudrate=config.baud, profile=config.crc_profile,
-                   period=config.data_period_ms / 1000.0, command_rate=config.command_rate_hz,
-                   stale_after=config.stale_command_s, keepalive_slack=slack, fallback=fallback,
-                   status_every=ll.status_every, rc_every=ll.rc_every,
-                   answer_timeout=ll.answer_timeout_ms / 1000.0,
-                   ack_timeout=ll.ack_timeout_ms / 1000.0, rc_map=RcMap(*ll.rc_channels))
+    def from_params(cls, params: LinkParams) -> LlLink:
+        """A link to an LL vehicle as ``params`` describe it (``protocol: asctec-ll``)."""
+        ll = params.ll
+        period = 1.0 / params.command_rate_hz
+        slack = max(0.0, min(params.data_period_ms / 1000.0, ll.fallback_s / 2 - period))
+        return cls(params.port, baudrate=params.baud, profile=params.crc_profile,
+                   period=params.data_period_ms / 1000.0, command_rate=params.command_rate_hz,
+                   stale_after=params.stale_command_s, keepalive_slack=slack,
+                   fallback=ll.fallback_s, status_every=ll.status_every, rc_every=ll.rc_every,
+                   answer_timeout=ll.answer_timeout_s, ack_timeout=ll.ack_timeout_s,
+                   rc_map=RcMap(*ll.rc_channels))
 
     # --- the VehicleLink interface --------------------------------------------------
 

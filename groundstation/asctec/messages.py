@@ -20,7 +20,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from enum import StrEnum
 from types import MappingProxyType
-from typing import ClassVar, Final, Literal
+from typing import ClassVar, Final
 
 from groundstation.asctec.blocks import (
     DATA_PAYLOAD_SIZES,
@@ -32,6 +32,7 @@ from groundstation.asctec.blocks import (
     StatusBlock,
 )
 from groundstation.errors import ProtocolError
+from groundstation.types import CHANNELS, Channel
 
 DESCRIPTOR_DATA: Final = 0x01
 DESCRIPTOR_CONFIG: Final = 0x10
@@ -63,12 +64,7 @@ class PayloadError(ProtocolError):
 
 # --- control channels (COMMAND ctrl mask, spec 3.2) -------------------------
 
-Channel = Literal["pitch", "roll", "yaw", "thrust"]
-"""A stick channel; the ctrl-mask bit is its index in :data:`CHANNELS`."""
-
-CHANNELS: Final[tuple[Channel, ...]] = ("pitch", "roll", "yaw", "thrust")
-"""Channels in ctrl-mask bit order (bit0 pitch, bit1 roll, bit2 yaw, bit3 thrust)."""
-
+# The channel names and their bit order: :data:`groundstation.types.CHANNELS`.
 CHANNEL_BITS: Final[Mapping[Channel, int]] = MappingProxyType(
     {name: 1 << i for i, name in enumerate(CHANNELS)}
 )

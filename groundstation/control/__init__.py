@@ -1,8 +1,11 @@
 """Control: LQR with reference models, PID baseline, H-infinity, trajectories (thesis Ch. 8-11).
 
-Pure numpy/scipy. The loop hands every controller the time, the state estimate
+Pure numpy/scipy. The flight core hands every controller the time, the state estimate
 and the trajectory reference and converts its output to sticks with
-:func:`to_sticks`:
+:func:`to_sticks`. The controllers: :class:`FeedforwardLqr` (lqr-ff, the default),
+:class:`LqrController` (the thesis's lqr-cv and lqr-cp), :class:`PidController` and
+:class:`HinfController`; each has a plain parameter record (:mod:`.params`) and
+:func:`make_controller` builds the one a record names:
 
 >>> from groundstation.control import LqrController, make_trajectory, to_sticks, StickParams
 >>> ctrl = LqrController(reference_model="velocity")          # doctest: +SKIP
@@ -12,6 +15,8 @@ and the trajectory reference and converts its output to sticks with
 
 from groundstation.control.base import Controller, NullController
 from groundstation.control.disturbance import DisturbanceObserver
+from groundstation.control.external_force import ExternalForceObserver
+from groundstation.control.factory import make_controller
 from groundstation.control.feasibility import (
     FeasibilityReport,
     FlightLimits,
@@ -19,6 +24,7 @@ from groundstation.control.feasibility import (
     Volume,
     check_feasibility,
 )
+from groundstation.control.hinf import HinfController, HinfGain, load_hinf_gain
 from groundstation.control.lqr import LqrController
 from groundstation.control.lqr_design import (
     TrackingGains,
@@ -26,6 +32,15 @@ from groundstation.control.lqr_design import (
     discretise,
     dlqr,
     riccati_iteration,
+)
+from groundstation.control.lqr_ff import FeedforwardLqr
+from groundstation.control.params import (
+    ControllerParams,
+    ExternalForceParams,
+    HinfParams,
+    LqrFfParams,
+    LqrParams,
+    PidParams,
 )
 from groundstation.control.pid import PidController
 from groundstation.control.shaping import MinJerkPath, TimeWarp, shape_for_flight
@@ -36,10 +51,12 @@ from groundstation.control.sticks import (
     to_sticks,
 )
 from groundstation.control.trajectories import (
+    TrajectorySpec,
+    build_trajectory,
+    load_trajectory_file,
     load_waypoints,
     make_trajectory,
     square,
-    trajectory_from_config,
     yz_rectangle,
 )
 from groundstation.control.trajectory import (
@@ -53,34 +70,48 @@ from groundstation.control.trajectory import (
 __all__ = [
     "CommandLimits",
     "Controller",
+    "ControllerParams",
     "DisturbanceObserver",
+    "ExternalForceObserver",
+    "ExternalForceParams",
     "FeasibilityReport",
+    "FeedforwardLqr",
     "FigureEight",
     "FlightLimits",
+    "HinfController",
+    "HinfGain",
+    "HinfParams",
     "Hover",
     "LimitNames",
     "LqrController",
+    "LqrFfParams",
+    "LqrParams",
     "MinJerkPath",
     "NullController",
     "PidController",
+    "PidParams",
     "PiecewiseLinear",
     "SaturationFlags",
     "StickParams",
     "TimeWarp",
     "TrackingGains",
     "Trajectory",
+    "TrajectorySpec",
     "Volume",
     "YawTurn",
+    "build_trajectory",
     "check_feasibility",
     "design_tracking_lqr",
     "discretise",
     "dlqr",
+    "load_hinf_gain",
+    "load_trajectory_file",
     "load_waypoints",
+    "make_controller",
     "make_trajectory",
     "riccati_iteration",
     "shape_for_flight",
     "square",
     "to_sticks",
-    "trajectory_from_config",
     "yz_rectangle",
 ]

@@ -246,8 +246,8 @@ def default_gain_path(include_rate_loop: bool) -> Path:
 
 ROBUST_RANGE = 0.3
 """The packaged rate-loop gain is designed for rate gains, rate-loop time constant and
-thrust per newton within +-30 % of nominal (issue 13: rate gains and time constant
-+-30 %, mass and thrust map +-15 % each)."""
+thrust per newton within +-30 % of nominal (the spread `gs eval --perturb` draws: rate
+gains and time constant +-30 %, mass and thrust map +-15 % each)."""
 POLE_RADIUS = 12.0
 """Disc [rad/s] the packaged rate-loop gain's poles are kept in: at most 24 rad/s, a
 loop the 50 Hz command link with ~40 ms of delay carries with margin."""

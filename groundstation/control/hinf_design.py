@@ -75,6 +75,21 @@ class HinfWeights:
 
 
 @dataclass(frozen=True, slots=True)
+class HinfDesign:
+    """How ``gs synth hinf`` designs a gain (:func:`groundstation.control.hinf.
+    synthesise_hinf`): the ``weights``, on the model with the rate-loop lag or the
+    thesis's (``include_rate_loop``), robust over +-``robust_range`` of the rate gains,
+    rate-loop lag and thrust, the closed-loop poles inside ``pole_radius`` [rad/s] and
+    left of ``-min_decay`` [1/s] (None: unconstrained)."""
+
+    weights: HinfWeights
+    include_rate_loop: bool
+    robust_range: float
+    pole_radius: float | None
+    min_decay: float | None
+
+
+@dataclass(frozen=True, slots=True)
 class StandardProblem:
     """``A, B1, B2, C1, D11, D12, C2, D21`` of eq. 10.1 and the state partition sizes:
     ``x = [x_s (n_s), x_r (n_r), x_n (n_n), x_i (n_i)]``."""

@@ -1,12 +1,12 @@
 """The named trajectories of thesis Ch. 11 and a waypoint file reader.
 
-:func:`make_trajectory` builds one by name (the names of
-``TrajectoryConfig.name``); :func:`trajectory_from_config` does the same from a
-``TrajectoryConfig``. Frames: NED, so a height of 1 m is ``z = -1``; seen from
-above, x (north) points up and y (east) right, so clockwise is
-north -> east -> south -> west. Headings: ``yaw=None`` keeps the heading the
-vehicle has at take-off (free heading), a number [rad] is absolute; a waypoint
-file's yaw column is absolute. These are the raw shapes;
+:func:`make_trajectory` builds one by name (the names of the configuration's
+``trajectory.name``); :func:`build_trajectory` does the same from a
+:class:`TrajectorySpec`, the record the configuration's section becomes. Frames:
+NED, so a height of 1 m is ``z = -1``; seen from above, x (north) points up and y
+(east) right, so clockwise is north -> east -> south -> west. Headings: ``yaw=None``
+keeps the heading the vehicle has at take-off (free heading), a number [rad] is
+absolute; a waypoint file's yaw column is absolute. These are the raw shapes;
 :func:`groundstation.control.shaping.shape_for_flight` makes them flyable.
 """
 
@@ -15,8 +15,9 @@ from __future__ import annotations
 import csv
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -37,9 +38,6 @@ from groundstation.types import FloatArray
 _VEHICLE = QuadrotorParams()
 """The vehicle model's defaults (the rate loop's time constant of the identification
 flight's pulses)."""
-
-if TYPE_CHECKING:
-    from groundstation.config import TrajectoryConfig
 
 TRAJECTORY_NAMES = (
     "hover", "step-x", "step-y", "step-z", "square", "yz-rectangle", "low-hover",
@@ -204,7 +202,7 @@ def make_trajectory(
     volume: Volume | None = None,
     rate_tau_s: float = _VEHICLE.rate_tau,
 ) -> Trajectory:
-    """Build a named trajectory (the names of ``TrajectoryConfig.name``).
+    """Build a named trajectory (the names of the configuration's ``trajectory.name``).
 
     hover: hold ``center``. step-x / step-y: hold ``center``, then at
     ``step_time_s`` step ``step_m`` north / east. step-z: step ``step_m`` *up*
@@ -266,16 +264,39 @@ def load_trajectory_file(path: str | Path, *, center: FloatArray | list[float],
     return load_waypoints(path, smoothing_s=smoothing_s, yaw=yaw)
 
 
-def trajectory_from_config(config: TrajectoryConfig, **overrides: Any) -> Trajectory:
-    """:func:`make_trajectory` with the fields of a ``TrajectoryConfig`` (degrees of
-    ``yaw_deg`` and ``yaw_turn_deg`` in radians); the raw shape, not yet shaped."""
+@dataclass(frozen=True, slots=True)
+class TrajectorySpec:
+    """A named trajectory as the configuration's ``trajectory`` section or a client's
+    ``follow`` request gives it: :func:`make_trajectory`'s arguments (angles in radians).
+
+    name : one of :data:`TRAJECTORY_NAMES` (or ``"none"``: flown by run-time commands)
+    center : NED [m]; size_m, step_m, low_height_m : [m]; period_s : one lap [s]
+    corner_smoothing_s : [s]; file : a waypoint or polynomial file (``waypoints``)
+    yaw : heading [rad] (None: the one at take-off); yaw_turn : a yaw-turn's turn [rad]
+    relative : a polynomial file's positions are relative to its start, placed at center
+    """
+
+    name: str
+    center: tuple[float, float, float]
+    size_m: float
+    period_s: float
+    step_m: float
+    low_height_m: float
+    corner_smoothing_s: float
+    file: Path | None
+    yaw: float | None
+    yaw_turn: float
+    relative: bool
+
+
+def build_trajectory(spec: TrajectorySpec, **overrides: Any) -> Trajectory:
+    """:func:`make_trajectory` for ``spec`` (``overrides`` replace or add arguments: a
+    step time, the identification flight's limits); the raw shape, not yet shaped."""
     params: dict[str, Any] = {
-        "center": config.center, "size_m": config.size_m, "period_s": config.period_s,
-        "step_m": config.step_m, "low_height_m": config.low_height_m,
-        "corner_smoothing_s": config.corner_smoothing_s, "file": config.file,
-        "yaw": None if config.yaw_deg is None else math.radians(config.yaw_deg),
-        "yaw_turn": math.radians(config.yaw_turn_deg),
-        "relative": config.polynomial_positions == "relative",
+        "center": spec.center, "size_m": spec.size_m, "period_s": spec.period_s,
+        "step_m": spec.step_m, "low_height_m": spec.low_height_m,
+        "corner_smoothing_s": spec.corner_smoothing_s, "file": spec.file, "yaw": spec.yaw,
+        "yaw_turn": spec.yaw_turn, "relative": spec.relative,
     }
     params.update(overrides)
-    return make_trajectory(config.name, **params)
+    return make_trajectory(spec.name, **params)

@@ -22,7 +22,7 @@ __all__ = ["Estimator", "PoseHoldEstimator"]
 
 @runtime_checkable
 class Estimator(Protocol):
-    """What the flight core (:class:`~groundstation.loop.core.FlightCore`) calls: initialise
+    """What the flight core (:class:`~groundstation.flight.core.FlightCore`) calls: initialise
     once, then update with poses and predict with IMU samples as they arrive; the core
     reads the estimate one IMU sample ahead of the filter (:meth:`estimate_ahead`), the
     failsafe figures (:attr:`diverged`, :attr:`time_since_fix`) every tick and

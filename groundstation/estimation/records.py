@@ -1,23 +1,26 @@
 """Parameters and result records of the IMU-driven EKF (thesis Ch. 6-7).
 
-:class:`EkfParams` maps one to one onto the ``vehicle`` (sensor variances) and
-``estimator`` sections of the configuration, with the gate reset's consistency
-figures and the plausible volume from the ``vicon`` and ``safety`` sections; see
-:meth:`EkfParams.from_config`.
+:class:`EkfParams` is a plain record, as PX4's ekf2 keeps its ``struct parameters``:
+the estimator never sees the configuration. Its fields come from the ``vehicle``
+(sensor variances) and ``estimator`` sections, with the gate reset's consistency
+figures and the plausible volume from the ``vicon`` and ``safety`` sections, in one
+place: :func:`groundstation.flight.assembly.ekf_params`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Literal
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
 from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.model.sensors import (
     ACC_VARIANCE_TABLE_6_3,
+    GRAVITY_CHECK_DEG,
     GYRO_VARIANCE_TABLE_6_3,
+    INITIAL_STATE_VARIANCE,
     VICON_POSITION_VARIANCE_TABLE_6_1,
     VICON_QUATERNION_VARIANCE_TABLE_6_1,
 )
@@ -25,15 +28,6 @@ from groundstation.types import FloatArray
 
 _VEHICLE = QuadrotorParams()
 """The vehicle model's defaults (g)."""
-
-if TYPE_CHECKING:  # pragma: no cover - import only for the type checker
-    from groundstation.config import (
-        EstimatorConfig,
-        SafetyConfig,
-        SerialConfig,
-        VehicleConfig,
-        ViconConfig,
-    )
 
 __all__ = ["EkfHealth", "EkfParams", "InitReport", "UpdateReason", "UpdateResult"]
 
@@ -52,10 +46,6 @@ UpdateReason = Literal[
     "implausible",  # a position outside the plausible volume (never fused, never reset to)
     "not_initialised",  # initialise() has not been called
 ]
-
-
-def _default_p0() -> tuple[float, ...]:
-    return (1e-4,) * 3 + (1e-4,) * 4 + (1e-2,) * 3 + (1e-3,) * 3 + (1e-1,) * 3
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,7 +81,7 @@ class EkfParams:
         grown by what the IMU may have missed (``reset_position_sigma``,
         ``reset_attitude_sigma``); the prediction's own covariance has grown with the
         time since the last fused pose. Never one pose, never a pose outside the
-        plausible volume (issue 14). 0.2 s and 3 poses (``vicon.reanchor_poses``): an
+        plausible volume. 0.2 s and 3 poses (``vicon.reanchor_poses``): an
         isolated outlier is still rejected, but a touchdown that left the velocity wrong
         is corrected within 0.2 s at 100 Hz Vicon and 0.3 s at 10 Hz.
     reset_position_sigma, reset_attitude_sigma : 1-sigma disagreement [m], [rad] the IMU
@@ -130,7 +120,7 @@ class EkfParams:
     vicon_position_var: Vec3 = VICON_POSITION_VARIANCE_TABLE_6_1
     vicon_quaternion_var: tuple[float, float, float, float] = VICON_QUATERNION_VARIANCE_TABLE_6_1
     min_measurement_var: float = 1e-9
-    initial_variance: tuple[float, ...] = field(default_factory=_default_p0)
+    initial_variance: tuple[float, ...] = INITIAL_STATE_VARIANCE
     gate_probability: float = 0.9999
     max_vicon_delay: float = 0.2
     gate_reset_after: float = 0.2
@@ -146,7 +136,7 @@ class EkfParams:
     imu_repeat_on_identical: bool = True
     init_biases_from_imu: bool = True
     stationary_gyro_std: float = 0.1
-    gravity_check_deg: float = 10.0
+    gravity_check_deg: float = GRAVITY_CHECK_DEG
 
     def __post_init__(self) -> None:
         """Validate once: shapes, positivity, probability range."""
@@ -180,61 +170,6 @@ class EkfParams:
         v = np.asarray(self.initial_variance, dtype=float)
         out: FloatArray = np.r_[v[0:3], 4.0 * v[4:7], v[7:16]]
         return out
-
-    @classmethod
-    def from_config(cls, vehicle: VehicleConfig, estimator: EstimatorConfig,
-                    vicon: ViconConfig | None = None,
-                    safety: SafetyConfig | None = None,
-                    serial: SerialConfig | None = None) -> EkfParams:
-        """Build from the ``vehicle`` and ``estimator`` configuration sections, the
-        ``vicon`` and ``safety`` ones for the gate reset, the plausible volume and the
-        gravity check (``safety.gravity_check_deg``), and the ``serial`` one for the IMU
-        period (``serial.data_period_ms``: the vehicle's IMU variances are per sample at
-        that period); the defaults without them.
-
-        ``estimator.r_override`` (7x7 or diagonal 7 over ``[P, q0..q3]``) replaces
-        Table 6.1; only its diagonal is used (``q0`` dropped, see above).
-        """
-        pos_var = tuple(vehicle.vicon_position_variance)
-        q_var = tuple(vehicle.vicon_quaternion_variance)
-        if estimator.r_override is not None:
-            r = np.asarray(estimator.r_override, dtype=float)
-            d = np.diag(r) if r.ndim == 2 else r
-            pos_var, q_var = tuple(d[0:3]), tuple(d[3:7])
-        p0 = np.asarray(estimator.initial_covariance, dtype=float)
-        p0d = np.diag(p0) if p0.ndim == 2 else p0
-        params = cls(
-            g=vehicle.gravity,
-            gyro_var=_vec3(vehicle.gyro_variance),
-            acc_var=_vec3(vehicle.acc_variance),
-            gyro_bias_walk=estimator.gyro_bias_walk,
-            acc_bias_walk=estimator.acc_bias_walk,
-            process_noise_scale=estimator.process_noise_scale,
-            vicon_position_var=_vec3(pos_var),
-            vicon_quaternion_var=(
-                float(q_var[0]), float(q_var[1]), float(q_var[2]), float(q_var[3])
-            ),
-            initial_variance=tuple(float(v) for v in p0d),
-            gate_probability=estimator.gate_probability,
-            max_vicon_delay=estimator.max_vicon_delay_s,
-            divergence_trace=estimator.divergence_trace,
-        )
-        if vicon is not None:
-            params = replace(params, gate_reset_count=vicon.reanchor_poses,
-                             max_speed=vicon.max_speed_m_s,
-                             max_rotation_rate=vicon.max_rotation_rate_rad_s)
-            if safety is not None:
-                params = replace(params, plausible_volume=vicon.plausible_volume(safety))
-        if safety is not None:
-            params = replace(params, gravity_check_deg=safety.gravity_check_deg)
-        if serial is not None:
-            params = replace(params, imu_period=serial.data_period_ms / 1000.0)
-        return params
-
-
-def _vec3(v: object) -> Vec3:
-    a = [float(x) for x in v]  # type: ignore[attr-defined]  # any iterable of 3 numbers
-    return (a[0], a[1], a[2])
 
 
 def _check_positive(name: str, values: tuple[float, ...], n: int) -> None:

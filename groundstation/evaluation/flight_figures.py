@@ -38,11 +38,11 @@ from groundstation.config import (
 from groundstation.evaluation.metrics import error_norms
 from groundstation.evaluation.plotting import pyplot, save
 from groundstation.evaluation.record import FlightRecord
-from groundstation.loop.supervisor import AIRBORNE, State
+from groundstation.flight.supervisor import AIRBORNE, State
 from groundstation.types import FloatArray
 
 Rows = npt.NDArray[np.void]
-"""A flight log's rows as :data:`groundstation.loop.recorder.RECORD_DTYPE`."""
+"""A flight log's rows as :data:`groundstation.app.recorder.RECORD_DTYPE`."""
 
 
 @dataclass(frozen=True)
@@ -173,7 +173,7 @@ class LogLimits:
 # ------------------------------------------------------------------ derived quantities
 def state_names(meta: Mapping[str, Any]) -> tuple[str, ...]:
     """The supervisor state names indexed by the ``state`` column (meta.json's
-    ``supervisor_states``, else :class:`~groundstation.loop.supervisor.State`)."""
+    ``supervisor_states``, else :class:`~groundstation.flight.supervisor.State`)."""
     names = meta.get("supervisor_states")
     if isinstance(names, list) and all(isinstance(n, str) for n in names):
         return tuple(names)
@@ -335,7 +335,7 @@ class FlightLog:
     @classmethod
     def of(cls, rows: Rows, meta: Mapping[str, Any], config_text: str, record: FlightRecord,
            title: str) -> FlightLog:
-        """From :func:`~groundstation.loop.recorder.read_flight`'s rows, meta and config and
+        """From :func:`~groundstation.app.recorder.read_flight`'s rows, meta and config and
         the flight's record."""
         return cls(rows, record, state_names(meta), LogLimits.from_config(config_text), title)
 

@@ -215,7 +215,7 @@ def track_clock(t: FloatArray, active: npt.NDArray[np.bool_]) -> FloatArray:
     t : (N,) row times; active : (N,) rows in which the trajectory runs (TRACK).
     A row adds its spacing to the previous row only if both rows are active,
     so the clock starts at 0 on the first active row and pauses outside them,
-    as :class:`groundstation.loop.mission.Mission` pauses it in HOLD.
+    as :class:`groundstation.flight.mission.Mission` pauses it in HOLD.
     """
     t = np.asarray(t, dtype=float)
     a = np.asarray(active, dtype=bool)

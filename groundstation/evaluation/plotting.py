@@ -16,7 +16,7 @@ import numpy as np
 
 from groundstation.errors import GroundStationError
 from groundstation.evaluation.record import FlightRecord
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from groundstation.types import FloatArray
 
 TRUTH_STYLE: dict[str, Any] = {"lw": 1.3}

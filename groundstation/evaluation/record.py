@@ -23,10 +23,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from groundstation.app.inprocess import FlightResult
+from groundstation.app.recorder import read_flight
 from groundstation.errors import RecorderError
-from groundstation.loop.inprocess import FlightResult
-from groundstation.loop.recorder import read_flight
-from groundstation.loop.supervisor import State, Transition
+from groundstation.flight.supervisor import State, Transition
 from groundstation.types import FloatArray
 
 TIMING_FAST = "back-to-back cost of FlightCore.tick (time.perf_counter, in-process)"
@@ -42,7 +42,7 @@ class FlightRecord:
     """Aligned per-tick arrays of one flight (N ticks, M Vicon poses).
 
     t : (N,) tick time [s] (lab time in-process, ``time.monotonic()`` for a log)
-    state : (N,) supervisor state (:class:`~groundstation.loop.supervisor.State` values)
+    state : (N,) supervisor state (:class:`~groundstation.flight.supervisor.State` values)
     ref_pos, est_pos : (N, 3) reference and estimate, NED [m] (estimate NaN before init)
     est_q : (N, 4) estimated attitude
     true_pos, true_q : (N, 3), (N, 4) ground truth, or None (real flight)
@@ -106,7 +106,7 @@ def record_from_trace(result: FlightResult, compute_s: FloatArray,
                       vicon: FloatArray, ref_yaw: FloatArray | None = None) -> FlightRecord:
     """A record of an in-process flight.
 
-    result : the flight's :class:`~groundstation.loop.inprocess.FlightResult`
+    result : the flight's :class:`~groundstation.app.inprocess.FlightResult`
     compute_s : (N,) per-tick cost of ``FlightCore.tick`` [s], one per trace row
     vicon : (M, 4) rows ``[t, x, y, z]`` of the poses handed to the core
     ref_yaw : (N,) reference heading per trace row [rad] (the trace does not keep it)
@@ -179,7 +179,7 @@ def align_truth(t: FloatArray, truth_t: FloatArray, position: FloatArray,
 
 
 def record_from_log(log: str | Path, truth_file: str | Path | None = None) -> FlightRecord:
-    """A record of a logged flight (:mod:`groundstation.loop.recorder`), with the virtual
+    """A record of a logged flight (:mod:`groundstation.app.recorder`), with the virtual
     lab's truth aligned on the monotonic clock when ``truth_file`` is given.
 
     RecorderError if the log or the truth cannot be read or do not belong together.

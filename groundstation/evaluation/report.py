@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 
 from groundstation import __version__
+from groundstation.app.recorder import read_flight
+from groundstation.errors import GroundStationError
 from groundstation.evaluation.flight_figures import (
     BENCHMARK_TARGETS,
     FIGURES,
@@ -30,8 +32,7 @@ from groundstation.evaluation.metrics import SETTLING_BAND, track_clock
 from groundstation.evaluation.plotting import pyplot
 from groundstation.evaluation.record import FlightRecord, record_from_log
 from groundstation.evaluation.scoring import StepSpec, flight_metrics
-from groundstation.loop.recorder import read_flight
-from groundstation.loop.supervisor import State, Transition
+from groundstation.flight.supervisor import State, Transition
 
 # (metrics key, column heading, scale, format)
 COLUMNS: tuple[tuple[str, str, float, str], ...] = (
@@ -193,6 +194,25 @@ def figures_section(figures: Sequence[Path], innovations: bool) -> list[str]:
               f"(benchmarks/bench_flight.py): {targets}, and the configured DATA period."]
     for p in figures:
         lines += ["", f"![{p.stem}]({p.name})"]
+    return lines
+
+
+def report_after_flight(log_dir: Path, truth: Path | None) -> list[str]:
+    """``gs fly --demo``'s report of the flight just flown (:func:`report_flight` into
+    ``log_dir/report``, judged against the virtual lab's ``truth``): the lines saying where
+    it is, or why there is none (the figure only where matplotlib is installed)."""
+    lines = []
+    try:
+        try:
+            report = report_flight(log_dir, truth)
+        except GroundStationError as exc:  # matplotlib missing: the metrics still count
+            lines.append(f"no figure: {exc}")
+            report = report_flight(log_dir, truth, figures=False)
+    except GroundStationError as exc:
+        return [*lines, f"no report: {exc}"]
+    lines.append(f"  report, judged from {report.record.truth_source}: {report.report_md}")
+    if report.figure is not None:
+        lines.append(f"  figure of the flown path against the reference: {report.figure}")
     return lines
 
 

@@ -46,7 +46,7 @@ from groundstation.evaluation.metrics import (
     wrap_deg,
 )
 from groundstation.evaluation.record import FlightRecord
-from groundstation.loop.supervisor import AIRBORNE, State
+from groundstation.flight.supervisor import AIRBORNE, State
 from groundstation.types import FloatArray
 
 StepSpec = tuple[int, float, float, float]

@@ -1,4 +1,4 @@
-"""System identification from flight logs (issue 17): the rate loop and the IMU scales.
+"""System identification from flight logs: the rate loop and the IMU scales.
 
 * :func:`identify_rates` fits each body axis's stick-to-rate gain, transport delay and
   rate-loop time constant (thesis eq. 3.22, Ch. 3.3.1, Fig. 3.8) to the recorded
@@ -12,7 +12,7 @@ The flight that feeds them is the identification flight, ``gs fly --trajectory s
 configured limits, climbs and descents); a refusal for want of excitation recommends
 it (:data:`~groundstation.identification.rates.SYSID_HINT`), and its log passes them all.
 
-Both read a flight directory written by :class:`groundstation.loop.recorder.FlightRecorder`
+Both read a flight directory written by :class:`groundstation.app.recorder.FlightRecorder`
 and its configuration, return frozen records with ``config_fields()`` (values keyed by
 the configuration's field paths), ``summary()`` and ``figure(path)``, and raise
 :class:`~groundstation.errors.IdentificationError` (a

@@ -38,8 +38,8 @@ Method (an output-error fit, exact for the model above):
   ``tau``'s interval is taken on ``ln tau`` so it stays positive.
 * The delay reported as ``delay_s`` is the configuration's
   ``vehicle.command_delay_s``: ``D`` less the frames' time on the serial wire
-  (:func:`groundstation.loop.inputs.wire_time_s`), which the model adds back
-  (:func:`groundstation.loop.inputs.quadrotor_params`). It still holds the ground
+  (:func:`groundstation.asctec.dialect.wire_time_s`), which the model adds back
+  (:func:`groundstation.flight.assembly.vehicle_model`). It still holds the ground
   station's compute time (a tick's COMMAND is written after its ``t``) and the
   vehicle's loop period (the virtual lab applies a command at its next 2 ms step).
 
@@ -64,11 +64,12 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
+from groundstation.app.recorder import read_flight
+from groundstation.asctec.dialect import wire_time_s
 from groundstation.config import GroundStationConfig, validate_config
 from groundstation.errors import ConfigError, IdentificationError, RecorderError
-from groundstation.loop.inputs import wire_time_s
-from groundstation.loop.recorder import read_flight
-from groundstation.loop.supervisor import AIRBORNE, State
+from groundstation.flight.assembly import link_params
+from groundstation.flight.supervisor import AIRBORNE, State
 from groundstation.types import FloatArray
 
 __all__ = [
@@ -105,7 +106,7 @@ class FlightLog:
     """A flight log read for identification.
 
     path : the flight directory
-    rows : (N,) the recorder's rows (:data:`groundstation.loop.recorder.RECORD_DTYPE`)
+    rows : (N,) the recorder's rows (:data:`groundstation.app.recorder.RECORD_DTYPE`)
     meta : meta.json; config : the configuration the flight flew with (config.yaml)
     airborne : (N,) the row's supervisor state is TAKEOFF/TRACK/HOLD/LAND *and* the
         estimated height above the floor (the estimate's z before take-off) is at least
@@ -577,7 +578,7 @@ def identify_rates(
                                       f"got {list(gyro_scale)}")
         zero = np.asarray(log.config.vehicle.gyro_zero, dtype=float)
         gyro = scale * (log.rows["gyro_counts"][log.imu].astype(float) - zero)
-    wire = wire_time_s(log.config)
+    wire = wire_time_s(link_params(log.config.serial))
     fits: dict[str, AxisRateFit] = {}
     for axis in AXES:
         if axis in axes:

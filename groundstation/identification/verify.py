@@ -27,12 +27,12 @@ from typing import Any
 import numpy as np
 import yaml
 
+from groundstation.app.recorder import read_flight
 from groundstation.config import validate_config
 from groundstation.errors import IdentificationError
+from groundstation.flight.assembly import link_params, vehicle_model
+from groundstation.flight.supervisor import AIRBORNE
 from groundstation.identification.rates import SYSID_HINT
-from groundstation.loop.inputs import quadrotor_params
-from groundstation.loop.recorder import read_flight
-from groundstation.loop.supervisor import AIRBORNE
 from groundstation.model.linear import hover_model
 from groundstation.model.quadrotor import QuadrotorModel, inputs_from_sticks
 from groundstation.types import FloatArray, Sticks
@@ -151,7 +151,7 @@ def verify_model(log_dir: str | Path) -> ModelVerification:
     """
     rows, _, config_text = read_flight(log_dir)
     cfg = validate_config(yaml.safe_load(config_text) or {})
-    params = quadrotor_params(cfg)
+    params = vehicle_model(cfg.vehicle, link_params(cfg.serial))
     # one sample per IMU sample (ticks without a new one repeat it)
     _, first = np.unique(rows["imu_t"], return_index=True)
     rows = rows[np.sort(first)]

@@ -52,6 +52,19 @@ VICON_QUATERNION_VARIANCE_TABLE_6_1: tuple[float, float, float, float] = (
 ACC_SATURATION_M_S2 = 14.0
 """The accelerometer saturates near this specific force [m/s^2] (Ch. 6.2)."""
 
+INITIAL_STATE_VARIANCE: tuple[float, ...] = (
+    (1e-4,) * 3 + (1e-4,) * 4 + (1e-2,) * 3 + (1e-3,) * 3 + (1e-1,) * 3)
+"""How far the state may be off when the estimator starts, as variances of the 16 states
+``[P (3), q (4), v (3), gyro bias (3), acc bias (3)]``: position and attitude from a
+Vicon pose (1 cm, 0.01) and the vehicle at rest (0.1 m/s), the gyro's and the
+accelerometer's bias spread (0.03 rad/s, 0.3 m/s^2). Loose enough for the biases to
+settle in about 3 s (Ch. 7.4)."""
+
+GRAVITY_CHECK_DEG = 10.0
+"""Largest angle between the gravity the accelerometer measures at rest and the one the
+Vicon attitude predicts [deg]: a wrong frame configuration (Vicon or IMU axes) or a
+moving vehicle, not the 0.3 m/s^2 bias spread above (2 deg) or a mounting tilt."""
+
 
 @dataclass(frozen=True, slots=True)
 class AxisScaling:

@@ -1,6 +1,6 @@
-"""CURVE authentication of the control socket (``gs channels``): key files and the ZAP check.
+"""CURVE authentication of the request socket (``gs channels``): key files and the ZAP check.
 
-A control socket bound beyond loopback must authenticate its clients (issue 14): the
+A request socket bound beyond loopback must authenticate its clients: the
 daemon is the CURVE server and answers only clients whose public key lies in a
 directory of authorised keys. Keys are the certificate files pyzmq writes::
 

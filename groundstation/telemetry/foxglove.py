@@ -44,7 +44,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from groundstation.errors import TelemetryError
-from groundstation.telemetry.client import TelemetryClient
 from groundstation.telemetry.schema import (
     SCHEMA_VERSION,
     TOPIC_HEALTH,
@@ -52,6 +51,7 @@ from groundstation.telemetry.schema import (
     health_json_schema,
     state_json_schema,
 )
+from groundstation.telemetry.subscriber import TelemetrySubscriber
 
 NED_FRAME = "ned"
 """The earth frame (NED) the poses and paths are expressed in."""
@@ -436,7 +436,7 @@ def run_foxglove(
         raise
     received, warned = 0, False
     try:
-        with TelemetryClient(endpoint) as client, _until_stopped() as signalled:
+        with TelemetrySubscriber(endpoint) as client, _until_stopped() as signalled:
             echo(f"foxglove: serving ws://{host}:{relay.port} (telemetry {endpoint}); "
                  f"open it in Foxglove or Lichtblick")
             end = None if duration is None else time.monotonic() + duration

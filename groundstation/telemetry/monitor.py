@@ -30,8 +30,8 @@ from typing import Any, TextIO
 import numpy as np
 
 from groundstation.model.quaternion import euler_from_quat
-from groundstation.telemetry.client import TelemetryClient
 from groundstation.telemetry.schema import SCHEMA_VERSION, TOPIC_HEALTH, TOPIC_STATE
+from groundstation.telemetry.subscriber import TelemetrySubscriber
 
 WIDTH = 79
 """Longest line drawn [characters]: one less than an 80-column terminal, so a line never
@@ -488,7 +488,7 @@ def run_monitor(
             stream.flush()
 
     end = math.inf if duration is None else time.monotonic() + duration
-    with TelemetryClient(endpoint) as client, _until_interrupted() as stop:
+    with TelemetrySubscriber(endpoint) as client, _until_interrupted() as stop:
         next_show = time.monotonic() + refresh_s
         while not stop.is_set():
             now = time.monotonic()

@@ -15,12 +15,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import structlog
 import zmq
 
-from groundstation.config import TelemetryConfig
 from groundstation.telemetry._zmqowner import ZmqOwner
 from groundstation.telemetry.schema import SCHEMA_VERSION, TOPIC_HEALTH, encode
 
@@ -28,6 +28,15 @@ log = structlog.get_logger(__name__)
 
 Snapshot = Mapping[str, Mapping[str, Any]]
 """What a snapshot function returns: topic -> payload body (see schema.py)."""
+
+
+@dataclass(frozen=True, slots=True)
+class PublisherParams:
+    """The telemetry publisher: the ZeroMQ ``endpoint`` it binds (None: no telemetry) and
+    the ``rate_hz`` [Hz] it publishes snapshots at."""
+
+    endpoint: str | None
+    rate_hz: float
 
 
 class TelemetryPublisher(ZmqOwner):
@@ -68,11 +77,11 @@ class TelemetryPublisher(ZmqOwner):
                 zmq.PUB, endpoint, "telemetry", {zmq.SNDHWM: sndhwm, zmq.XPUB_NODROP: 1})
 
     @classmethod
-    def from_config(
-        cls, config: TelemetryConfig, context: zmq.Context[Any] | None = None
+    def from_params(
+        cls, params: PublisherParams, context: zmq.Context[Any] | None = None
     ) -> TelemetryPublisher:
-        """A publisher for the ``telemetry`` section (disabled if ``enabled`` is false)."""
-        return cls(config.endpoint if config.enabled else None, config.rate_hz, context=context)
+        """A publisher as ``params`` describe it (disabled without an endpoint)."""
+        return cls(params.endpoint, params.rate_hz, context=context)
 
     @property
     def enabled(self) -> bool:

@@ -42,7 +42,7 @@ Topic ``health`` (each section an object, or null when that part is not running)
                 time_since_pose_s, and any further counters (ViconHealth's fields)
     estimator   estimator counters, e.g. rejected updates (free-form object)
     loop        loop timing, e.g. overruns, compute_time_s, jitter_s (free-form)
-    control     the control socket (``gs channels``): {answered, malformed, failed,
+    control     the request socket (``gs channels``): {answered, malformed, failed,
                 frames_discarded, refused, socket_errors, reopened} | null
     telemetry   {sent, dropped, errors}: this publisher's own counters
 
@@ -258,7 +258,7 @@ def state_json_schema(title: str = "groundstation.telemetry.state") -> dict[str,
 def health_json_schema(title: str = "groundstation.telemetry.health") -> dict[str, Any]:
     """JSON Schema of a ``health`` message (units in the descriptions)."""
     from groundstation.estimation.records import EkfHealth
-    from groundstation.telemetry.control import ControlStats
+    from groundstation.telemetry.requests import RequestStats
     from groundstation.vicon.health import ViconHealth
 
     return {"title": title, **_object("telemetry topic 'health'", {
@@ -270,7 +270,7 @@ def health_json_schema(title: str = "groundstation.telemetry.health") -> dict[st
         "estimator": _counters(EkfHealth, "estimator counters and consistency"),
         "loop": _object("loop", {"ticks": _field("integer", "loop ticks"),
                                  "commands": _field("integer", "COMMANDs sent")}),
-        "control": _counters(ControlStats, "the control socket's counters"),
+        "control": _counters(RequestStats, "the request socket's counters"),
         "telemetry": _object("this publisher", {
             k: _field("integer", f"messages {k}") for k in ("sent", "dropped", "errors")}),
     })}

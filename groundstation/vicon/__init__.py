@@ -1,4 +1,4 @@
-"""Vicon Tracker UDP object stream: sans-IO decoder, frame conversion, filter, client.
+"""Vicon Tracker UDP object stream: sans-IO decoder, frame conversion, filter, receiver.
 
 Data flow::
 
@@ -8,12 +8,11 @@ Data flow::
         -> groundstation.types.Pose (NED m, q scalar first)
            + ViconEvidence per tick (rival streams, sightings outside the volume)
 
-Only :class:`ViconClient` touches a socket; everything else is pure and testable
+Only :class:`ViconReceiver` touches a socket; everything else is pure and testable
 with bytes. The byte layout is ``docs/vicon-udp.md``; the frame
 conventions are in :mod:`groundstation.vicon.frames`.
 """
 
-from groundstation.vicon.client import DEFAULT_PORT, ViconClient
 from groundstation.vicon.decoder import (
     BadDatagram,
     DatagramDecoder,
@@ -30,7 +29,8 @@ from groundstation.vicon.frames import (
     vicon_to_ned,
 )
 from groundstation.vicon.health import RateMonitor, ViconEvidence, ViconHealth
-from groundstation.vicon.posefilter import FilterOptions, PoseFilter, filter_options
+from groundstation.vicon.posefilter import FilterOptions, PoseFilter, PoseFilterParams
+from groundstation.vicon.receiver import DEFAULT_PORT, ViconParams, ViconReceiver
 
 __all__ = [
     "DEFAULT_BODY_TO_OBJECT",
@@ -42,14 +42,15 @@ __all__ = [
     "FrameConversion",
     "ObjectPose",
     "PoseFilter",
+    "PoseFilterParams",
     "RateMonitor",
-    "ViconClient",
     "ViconEvidence",
     "ViconFrame",
     "ViconHealth",
+    "ViconParams",
+    "ViconReceiver",
     "decode_datagram",
     "encode_datagram",
-    "filter_options",
     "ned_to_vicon",
     "vicon_to_ned",
 ]

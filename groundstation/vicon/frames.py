@@ -106,6 +106,15 @@ def euler_xyz_to_matrix(rx: float, ry: float, rz: float) -> FloatArray:
     )
 
 
+def rotation_from_euler_deg(euler_xyz_deg: Sequence[float]) -> FloatArray:
+    """The (3, 3) rotation ``Rx(a) @ Ry(b) @ Rz(c)`` of intrinsic X-Y-Z Euler angles
+    ``(a, b, c)`` [deg], as the configuration gives ``vicon.world_to_ned`` and
+    ``vicon.body_to_object`` (scipy's ``Rotation.from_euler("XYZ", ..., degrees=True)``)."""
+    from scipy.spatial.transform import Rotation
+
+    return np.asarray(Rotation.from_euler("XYZ", list(euler_xyz_deg), degrees=True).as_matrix())
+
+
 def matrix_to_euler_xyz(m: FloatArray) -> Vector3:
     """Inverse of :func:`euler_xyz_to_matrix` for a rotation matrix ``m`` (3, 3).
 

@@ -1,6 +1,6 @@
 """Absolute plausibility of one Vicon object item: could Tracker have seen it there?
 
-Every pose of the tracked object passes this before anything else (issue 14), at
+Every pose of the tracked object passes this before anything else, at
 start-up and after a gap too, and before any arithmetic that could overflow:
 
 1. **Raw values** (Vicon's mm and radians, already known to be finite): every
@@ -42,6 +42,13 @@ Box = tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
 DEFAULT_VOLUME: Final[Box] = ((-2.0, 2.0), (-2.0, 2.0), (-2.5, 0.55))
 """The configuration's defaults: ``safety.volume_x/y/z`` (Table B.1: +/-1.5 m, 0..2 m
 height, z to +0.05 m) grown by ``vicon.plausibility_margin_m`` (0.5 m)."""
+
+def grown(box: Box, margin: float) -> Box:
+    """``box`` grown by ``margin`` [m] on every side (the flight volume grown by
+    ``vicon.plausibility_margin_m`` is where a pose can be)."""
+    (x0, x1), (y0, y1), (z0, z1) = box
+    return ((x0 - margin, x1 + margin), (y0 - margin, y1 + margin), (z0 - margin, z1 + margin))
+
 
 SIGHTING_MARGIN_M: Final = 10.0
 """How far beyond the plausible volume a pose is still a sighting, not absurd [m].

@@ -36,7 +36,7 @@
 Only datagrams that carry a usable pose of the followed object ever touch the frame
 bookkeeping; other objects' items and pose-less datagrams are counted and ignored.
 No arithmetic on a received number before it is known to be finite and bounded,
-so no datagram can make numpy warn (issue 14).
+so no datagram can make numpy warn.
 
 Datagrams that stop are visible in :class:`ViconHealth` (rate of the followed
 stream, time since the last pose), and the rate leaving its band is logged by
@@ -49,8 +49,9 @@ Not thread-safe: the client serialises calls.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from types import MappingProxyType
-from typing import TYPE_CHECKING, TypedDict
+from typing import TypedDict
 
 import numpy.typing as npt
 import structlog
@@ -74,11 +75,13 @@ from groundstation.vicon.plausibility import (
 )
 from groundstation.vicon.streams import FOLLOWED, RIVAL, Gate, Streams
 
-if TYPE_CHECKING:  # config is only needed by from_config; no import cycle at run time
-    from groundstation.config import SafetyConfig, ViconConfig
-
 MAX_RATE_FACTOR = 1.2
-"""from_config: warn above expected_rate_hz * 1.2 (a faster stream is misconfigured)."""
+"""A stream faster than its expected rate times this is misconfigured (the rate band's top,
+``max_rate_hz``, as the assembly sets it from ``vicon.expected_rate_hz``)."""
+
+Matrix3 = tuple[tuple[float, float, float], tuple[float, float, float],
+                tuple[float, float, float]]
+"""A (3, 3) rotation as rows."""
 
 
 class FilterOptions(TypedDict, total=False):
@@ -99,22 +102,37 @@ class FilterOptions(TypedDict, total=False):
     warn_interval_s: float
 
 
-def filter_options(config: ViconConfig, safety: SafetyConfig) -> FilterOptions:
-    """The :class:`FilterOptions` the ``vicon:`` and ``safety:`` sections ask for.
+@dataclass(frozen=True, slots=True)
+class PoseFilterParams:
+    """What the pose filter is built with (see :class:`PoseFilter` for each).
 
-    max_rate_hz is not configured: it is ``MAX_RATE_FACTOR * expected_rate_hz``; the
-    plausible volume is the flight volume grown by ``vicon.plausibility_margin_m``.
+    object_name : the Tracker object; world_to_ned, body_to_object : rotations C_wn, C_bo
+    latency_s : [s]; restart_silence_s : [s]; restart_backjump_frames : [frames]
+    max_speed : [m/s]; max_rotation_rate : [rad/s]; reanchor_poses : [-]
+    plausible_volume : NED [m]; min_rate_hz, max_rate_hz : the rate band [Hz]
     """
-    return FilterOptions(
-        restart_silence_s=config.restart_silence_s,
-        restart_backjump_frames=config.restart_backjump_frames,
-        max_speed=config.max_speed_m_s,
-        max_rotation_rate=config.max_rotation_rate_rad_s,
-        reanchor_poses=config.reanchor_poses,
-        plausible_volume=config.plausible_volume(safety),
-        min_rate_hz=config.min_rate_hz,
-        max_rate_hz=MAX_RATE_FACTOR * config.expected_rate_hz,
-    )
+
+    object_name: str
+    world_to_ned: Matrix3
+    body_to_object: Matrix3
+    latency_s: float
+    restart_silence_s: float
+    restart_backjump_frames: int
+    max_speed: float
+    max_rotation_rate: float
+    reanchor_poses: int
+    plausible_volume: Box
+    min_rate_hz: float
+    max_rate_hz: float
+
+    def options(self) -> FilterOptions:
+        """The optional arguments of :class:`PoseFilter` these parameters set."""
+        return FilterOptions(
+            restart_silence_s=self.restart_silence_s,
+            restart_backjump_frames=self.restart_backjump_frames,
+            max_speed=self.max_speed, max_rotation_rate=self.max_rotation_rate,
+            reanchor_poses=self.reanchor_poses, plausible_volume=self.plausible_volume,
+            min_rate_hz=self.min_rate_hz, max_rate_hz=self.max_rate_hz)
 
 
 class PoseFilter:
@@ -220,20 +238,12 @@ class PoseFilter:
         self._sighting_t = -math.inf  # its receive time [s]
 
     @classmethod
-    def from_config(
-        cls, config: ViconConfig, safety: SafetyConfig,
-        logger: structlog.typing.FilteringBoundLogger | None = None,
-    ) -> PoseFilter:
-        """Build from the ``vicon:`` section, with the flight volume of the ``safety:``
-        section (see :func:`filter_options`)."""
-        return cls(
-            config.object_name,
-            world_to_ned=config.world_to_ned.as_matrix(),
-            body_to_object=config.body_to_object.as_matrix(),
-            latency_s=config.latency_s,
-            logger=logger,
-            **filter_options(config, safety),
-        )
+    def from_params(cls, params: PoseFilterParams,
+                    logger: structlog.typing.FilteringBoundLogger | None = None) -> PoseFilter:
+        """A filter built with ``params``."""
+        return cls(params.object_name, world_to_ned=params.world_to_ned,
+                   body_to_object=params.body_to_object, latency_s=params.latency_s,
+                   logger=logger, **params.options())
 
     def process(self, datagram: bytes | bytearray | memoryview, t_receive: float) -> Pose | None:
         """Process one datagram received at monotonic time ``t_receive`` [s].

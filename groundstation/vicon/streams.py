@@ -1,6 +1,6 @@
 """Pose streams of the tracked object: consistency, confirmation, following, frame numbers.
 
-Poses of one object name may come from more than one sender (issue 14: a hostile
+Poses of one object name may come from more than one sender (a hostile
 or misconfigured one beside Tracker), and after a gap any single pose may be wrong.
 :class:`Streams` therefore sorts the sighted poses (see :mod:`.plausibility`)
 into **streams**, each a sequence of poses in which every pose agrees with the one

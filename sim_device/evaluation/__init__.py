@@ -1,10 +1,10 @@
-"""Evaluation: the flights of thesis Ch. 11 and issue 13 in the virtual lab, scored from
-ground truth.
+"""Evaluation: the flights of thesis Ch. 11 and the later ones (shaped references, trajectory
+files, disturbances) in the virtual lab, scored from ground truth.
 
 ``gs eval`` is :func:`run_eval` (the suite of :mod:`.scenarios`, in-process with the
 simulated clock or in real time over the pty and UDP; with ``perturb`` seeds on the
 vehicles :func:`perturbation` draws, reduced by
-:func:`~groundstation.evaluation.worst_case` and checked against issue 13's targets by
+:func:`~groundstation.evaluation.worst_case` and checked against the targets (:mod:`.targets`) by
 :func:`check_targets`). It writes ``report.md``, ``metrics.json`` and PNG figures; a
 single flight's metrics and figure are the ground station's own
 (:mod:`groundstation.evaluation`, ``gs report``).

@@ -33,7 +33,7 @@ import numpy as np
 
 from groundstation.evaluation.metrics import error_norms, track_clock
 from groundstation.evaluation.record import FlightRecord
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 
 RECOVERED_M = 0.01
 """"Back within 1 cm" [m]."""

@@ -1,5 +1,5 @@
 """The suite's figures, mirroring thesis Ch. 11 (Fig. 11.1-11.8) plus the fault scenarios
-(issue 13's flights: :mod:`sim_device.evaluation.figures_issue13`).
+(the shaped flights': :mod:`sim_device.evaluation.figures_shaped`).
 
 Each function takes the flights by scenario name (see
 :mod:`sim_device.evaluation.scenarios`) and writes one PNG; a figure whose
@@ -34,10 +34,10 @@ from groundstation.evaluation.plotting import (
     top_view,
 )
 from groundstation.evaluation.record import FlightRecord
-from groundstation.loop.supervisor import AIRBORNE, State
+from groundstation.flight.supervisor import AIRBORNE, State
 from sim_device.evaluation.figures_disturbances import disturbance_figures
 from sim_device.evaluation.figures_inputs import input_figures
-from sim_device.evaluation.figures_issue13 import issue13_figures
+from sim_device.evaluation.figures_shaped import shaped_figures
 from sim_device.evaluation.scenarios import STEP_TIME_S
 
 Records = Mapping[str, FlightRecord]
@@ -349,7 +349,7 @@ def all_figures(records: Records, models: Mapping[str, SimResult], out: Path,
         lambda: square(records, out, period_s), lambda: yz_rectangle(records, out, period_s),
         lambda: low_hover(records, out), lambda: outage(records, out),
         lambda: thrust_error(records, out), lambda: hinf(records, out),
-        lambda: issue13_figures(records, out), lambda: input_figures(records, out),
+        lambda: shaped_figures(records, out), lambda: input_figures(records, out),
         lambda: disturbance_figures(records, out),
     ]
     paths: list[Path] = []

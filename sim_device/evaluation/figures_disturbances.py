@@ -20,7 +20,7 @@ import numpy as np
 from groundstation.evaluation.metrics import error_norms
 from groundstation.evaluation.plotting import REF_STYLE, pyplot, save, since
 from groundstation.evaluation.record import FlightRecord
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from sim_device.evaluation.scenarios import DISTURBED, select
 
 Records = Mapping[str, FlightRecord]

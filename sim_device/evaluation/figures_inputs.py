@@ -17,7 +17,7 @@ import numpy as np
 from groundstation.evaluation.metrics import error_norms
 from groundstation.evaluation.plotting import REF_STYLE, TRUTH_STYLE, pyplot, save, since, top_view
 from groundstation.evaluation.record import FlightRecord
-from groundstation.loop.supervisor import State
+from groundstation.flight.supervisor import State
 from sim_device.evaluation.targets import TARGETS
 
 Records = Mapping[str, FlightRecord]

@@ -1,5 +1,6 @@
 """Perturbed plants for ``gs eval --perturb SEED``: the virtual lab made to differ from the
-design model, drawn per seed from stated ranges (issue 13).
+design model, drawn per seed from stated ranges (the spread a controller must stand: rate
+gains and their lag +-30 %, mass and thrust map +-15 %).
 
 The controllers are designed on the vehicle section of the configuration (rate gains,
 rate-loop time constant, command delay, mass, thrust map); the virtual lab equals that

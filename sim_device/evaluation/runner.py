@@ -1,14 +1,14 @@
 """Fly one scenario: in-process on the simulated clock, or in real time over pty and UDP.
 
-Both runners build the same :class:`~groundstation.loop.core.FlightCore` from
+Both runners build the same :class:`~groundstation.flight.core.FlightCore` from
 :func:`~sim_device.evaluation.scenarios.scenario_config` (trajectory,
 controller, duration) and return a :class:`FlightRecord`:
 
-* :func:`run_in_process` flies :class:`~groundstation.loop.inprocess.InProcessFlight`
+* :func:`run_in_process` flies :class:`~groundstation.app.inprocess.InProcessFlight`
   and times every ``FlightCore.tick`` with ``time.perf_counter`` (the code's
   back-to-back cost, not a real-time figure);
 * :func:`run_real_time` starts the virtual lab (``gs sim-device``) in a child
-  process, flies :class:`~groundstation.loop.daemon.FlightDaemon` against it in
+  process, flies :class:`~groundstation.app.daemon.FlightDaemon` against it in
   real time, then reads the flight log and the lab's truth file, aligned on the
   monotonic clock. Timing comes from the log (compute, jitter, latency).
 
@@ -27,15 +27,16 @@ from pathlib import Path
 
 import numpy as np
 
+from groundstation.app.daemon import FlightDaemon
+from groundstation.app.inprocess import InProcessFlight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config
+from groundstation.control.factory import make_controller
 from groundstation.control.simulate import SimPlant, SimResult, simulate
 from groundstation.errors import GroundStationError
 from groundstation.evaluation.record import FlightRecord, record_from_log, record_from_trace
-from groundstation.loop.assemble import controller_from_config
-from groundstation.loop.core import FlightCore, TickResult
-from groundstation.loop.daemon import FlightDaemon
-from groundstation.loop.inprocess import InProcessFlight
-from groundstation.loop.inputs import InputHealth, VehicleStatus, quadrotor_params
+from groundstation.flight.assembly import assemble
+from groundstation.flight.core import FlightCore, TickResult
+from groundstation.flight.inputs import InputHealth, VehicleStatus
 from groundstation.types import ImuSample, Pose
 from sim_device.config import sim_section
 from sim_device.evaluation.scenarios import (
@@ -78,7 +79,7 @@ class _TickProbe:
 def run_in_process(scenario: Scenario, base: GroundStationConfig) -> FlightRecord:
     """Fly ``scenario`` in-process against the virtual lab (deterministic for a seed)."""
     cfg = scenario_config(scenario, base)
-    flight = InProcessFlight(cfg,
+    flight = InProcessFlight(assemble(cfg),
                              trajectory=scenario_trajectory(scenario, cfg),
                              duration_s=scenario.duration_s)
     probe = _TickProbe(flight.core)
@@ -97,7 +98,7 @@ def free_udp_port() -> int:
 
 def build_daemon(scenario: Scenario, cfg: GroundStationConfig) -> FlightDaemon:
     """A daemon flying the scenario's controller (from ``cfg``) and trajectory."""
-    return FlightDaemon(cfg, trajectory=scenario_trajectory(scenario, cfg),
+    return FlightDaemon(assemble(cfg), trajectory=scenario_trajectory(scenario, cfg),
                         duration_s=scenario.duration_s)
 
 
@@ -133,12 +134,13 @@ def simulate_model(scenario: Scenario, base: GroundStationConfig) -> SimResult:
     (:func:`groundstation.control.simulate.simulate`) with the lab's rate-loop lag,
     command delay and thrust error; starts on the trajectory, lasts ``duration_s``."""
     cfg = scenario_config(scenario, base)
-    controller = controller_from_config(cfg)
+    params = assemble(cfg)
+    controller = make_controller(params.controller, params.vehicle, params.command_period_s)
     sim, vehicle = sim_section(cfg), cfg.vehicle
     plant = SimPlant(
         rate_tau=vehicle.rate_loop_tau_s if sim.rate_loop_tau_s is None else sim.rate_loop_tau_s,
         delay_s=vehicle.command_delay_s if sim.command_delay_s is None else sim.command_delay_s,
         thrust_scale=sim.thrust_scale)
     return simulate(controller, scenario_trajectory(scenario, cfg), scenario.duration_s,
-                    params=quadrotor_params(cfg), plant=plant,
+                    params=params.vehicle, plant=plant,
                     rate_hz=cfg.serial.command_rate_hz)

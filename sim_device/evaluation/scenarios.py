@@ -4,7 +4,7 @@ A :class:`Scenario` names a trajectory, a controller, the Vicon rate, how long t
 trajectory is flown and the configuration overrides that inject faults. The
 runners (:mod:`sim_device.evaluation.runner`) turn one into a flight, in-process
 on the simulated clock or in real time over the pty and UDP; both fly the same
-:class:`~groundstation.loop.core.FlightCore` with the same configuration.
+:class:`~groundstation.flight.core.FlightCore` with the same configuration.
 
 Choices where the thesis leaves room (each stated in the report):
 
@@ -19,7 +19,7 @@ Choices where the thesis leaves room (each stated in the report):
 * the Ch. 11 flights fly the thesis's raw references (``trajectory.shaping: none``:
   sharp corners, set-point steps), so they stay comparable with the thesis.
 
-Issue 13's flights (:data:`ISSUE13`) fly the new default controller ``lqr-ff`` on
+The shaped flights (:data:`SHAPED_FLIGHTS`) fly the default controller ``lqr-ff`` on
 shaped references (``trajectory.shaping: min-jerk``), at several headings:
 
 * figure-eight 1.2 m x 0.6 m, 8 s per lap, 4 laps, scored after the first lap;
@@ -66,9 +66,10 @@ import numpy as np
 
 from groundstation.config import GroundStationConfig, apply_overrides
 from groundstation.control.hinf import default_gain_path
-from groundstation.control.trajectories import trajectory_from_config
+from groundstation.control.trajectories import build_trajectory
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import ConfigError
+from groundstation.flight.assembly import trajectory_spec
 from groundstation.types import FloatArray
 
 STEP_TIME_S = 3.0
@@ -85,7 +86,7 @@ RAW: dict[str, Any] = {"trajectory.shaping": "none"}
 """The thesis's reference as it is (Ch. 11 flights)."""
 
 SHAPED: dict[str, Any] = {"trajectory.shaping": "min-jerk"}
-"""The reference made flyable before flight (issue 13 flights)."""
+"""The reference made flyable before flight (the shaped flights and the later ones)."""
 
 PERIODIC = ("square", "yz-rectangle", "figure-eight")
 """Trajectories that repeat every ``trajectory.period_s``."""
@@ -203,38 +204,39 @@ def _thesis() -> list[Scenario]:
     return out
 
 
-def _issue13() -> list[Scenario]:
-    """Issue 13: lqr-ff on shaped references, headings, and the comparison controllers."""
+def _shaped() -> list[Scenario]:
+    """The shaped flights: lqr-ff on shaped references at several headings, the comparison
+    controllers on the same references, and H-infinity with its rate gains 30 % off."""
     out = [Scenario(f"figure-eight-{c}", "figure-eight",
-                    f"Figure-eight 1.2 m x 0.6 m, 8 s per lap, 4 laps, {c}", "issue 13",
+                    f"Figure-eight 1.2 m x 0.6 m, 8 s per lap, 4 laps, {c}", "shaped reference",
                     "figure-eight", c, 32.0, overrides={**SHAPED, **EIGHT}, settle_s=8.0)
            for c in ("lqr-ff", "pid", "lqr-cp", "lqr-cv")]
     out.append(Scenario("yaw-turn", "yaw-turn", "360 degree yaw turn in 20 s holding position",
-                        "issue 13", "yaw-turn", "lqr-ff", 20.0,
+                        "shaped reference", "yaw-turn", "lqr-ff", 20.0,
                         overrides={**SHAPED, "trajectory.period_s": 20.0,
                                    "trajectory.yaw_turn_deg": 360.0}))
     for heading in (0, 135):
         tag = "" if heading == 0 else f"-h{heading}"
         out.append(Scenario(f"square-shaped{tag}-lqr-ff", "square-shaped",
                             f"Shaped 0.75 m square at heading {heading} deg, 2 laps, lqr-ff",
-                            "issue 13", "square", "lqr-ff", 40.0,
+                            "shaped reference", "square", "lqr-ff", 40.0,
                             overrides={**SHAPED, "trajectory.yaw_deg": float(heading),
                                        "sim.initial_yaw_deg": float(heading)}))
     out += [Scenario(f"square-shaped-{c}", "square-shaped",
-                     f"Shaped 0.75 m square at heading 0 deg, 2 laps, {c}", "issue 13",
+                     f"Shaped 0.75 m square at heading 0 deg, 2 laps, {c}", "shaped reference",
                      "square", c, 40.0, overrides={**SHAPED, "trajectory.yaw_deg": 0.0})
             for c in ("pid", "lqr-cp", "lqr-cv")]
     out.append(Scenario("takeoff-h135", "headings",
                         "Take-off 2 cm off the hover point at heading 135 deg, hover",
-                        "issue 13", "hover", "lqr-ff", 15.0,
+                        "shaped reference", "hover", "lqr-ff", 15.0,
                         overrides={**SHAPED, "sim.initial_yaw_deg": 135.0,
                                    "sim.initial_position": [*TAKEOFF_OFFSET_M, 0.0]}))
     out += [Scenario(f"hover-h{h}", "headings", f"Hover at heading {h} deg (free heading)",
-                     "issue 13", "hover", "lqr-ff", 15.0,
+                     "shaped reference", "hover", "lqr-ff", 15.0,
                      overrides={**SHAPED, "sim.initial_yaw_deg": float(h)})
             for h in (90, 180, 270)]
     out += [Scenario(f"hinf-rate-gains-{tag}", "hinf",
-                     f"H-infinity (rate-loop design), rate gains {pct} % {tag}", "issue 13",
+                     f"H-infinity (rate-loop design), rate gains {pct} % {tag}", "robustness",
                      "hover", "hinf-rate-loop", 20.0,
                      overrides={**RAW, "sim.k_rate_scale": [scale] * 3})
             for tag, pct, scale in (("low", 30, 0.7), ("high", 30, 1.3))]
@@ -318,7 +320,7 @@ def _disturbances() -> list[Scenario]:
 
 
 def _suite() -> tuple[Scenario, ...]:
-    return (*_thesis(), *_issue13(), *_files(), *_disturbances())
+    return (*_thesis(), *_shaped(), *_files(), *_disturbances())
 
 
 SUITE: tuple[Scenario, ...] = _suite()
@@ -327,8 +329,9 @@ SUITE: tuple[Scenario, ...] = _suite()
 THESIS: tuple[str, ...] = tuple(s.name for s in _thesis())
 """The names of the Ch. 11 flights (and the fault flights built on them)."""
 
-ISSUE13: tuple[str, ...] = tuple(s.name for s in _issue13())
-"""The names of issue 13's flights."""
+SHAPED_FLIGHTS: tuple[str, ...] = tuple(s.name for s in _shaped())
+"""The names of the shaped flights (lqr-ff on shaped references at several headings, the
+comparison controllers, H-infinity's robustness)."""
 
 FILES: tuple[str, ...] = tuple(s.name for s in _files())
 """The names of the trajectory-file flights."""
@@ -384,7 +387,7 @@ def scenario_config(scenario: Scenario, base: GroundStationConfig) -> GroundStat
 def scenario_trajectory(scenario: Scenario, config: GroundStationConfig) -> Trajectory:
     """The scenario's trajectory (steps at :data:`STEP_TIME_S`)."""
     extra = {"step_time_s": STEP_TIME_S} if scenario.is_step else {}
-    return trajectory_from_config(config.trajectory, **extra)
+    return build_trajectory(trajectory_spec(config.trajectory), **extra)
 
 
 def step_of(trajectory: Trajectory) -> tuple[float, FloatArray, FloatArray]:

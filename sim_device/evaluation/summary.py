@@ -130,7 +130,7 @@ def eval_markdown(report: EvalReport, config: GroundStationConfig,
         f"- timing: {TIMING_FAST if report.fast else TIMING_REAL_TIME}",
         f"- steps come {STEP_TIME_S:g} s after tracking starts; Vicon 10 Hz unless stated "
         "(thesis Ch. 11.1); hover uses the constant-position LQR as in the thesis; the "
-        "Ch. 11 flights fly the thesis's raw references, issue 13's shaped ones (min-jerk)",
+        "Ch. 11 flights fly the thesis's raw references, the later ones shaped ones (min-jerk)",
         "", *_targets_section(report.targets(), perturbed),
         "## Metrics" + (f" (worst case over {len(report.plants)} plants)" if perturbed else ""),
         "", table, DEFINITIONS,

@@ -1,0 +1,99 @@
+"""Network endpoints: what a UDP host address and a ZeroMQ endpoint are, and whether an
+endpoint reaches only this machine.
+
+The configuration checks the addresses it is given with these (``vicon.bind_address``,
+``telemetry.endpoint``, ``telemetry.control_endpoint``), and the request socket refuses,
+with the same rule, to serve beyond loopback without authentication.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import re
+
+_HOST_LABEL = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)$")
+
+
+def host_address(value: str) -> str:
+    """An IPv4 address or a host name (RFC 1123: dot-separated labels of letters, digits
+    and hyphens, at most 253 characters); ValueError naming what is wrong otherwise."""
+    try:
+        address = ipaddress.ip_address(value)
+    except ValueError:
+        address = None
+    if address is not None:
+        if address.version != 4:
+            raise ValueError("an IPv6 address: this socket is IPv4 (AF_INET); give an IPv4 "
+                             "address or a host name")
+        return value
+    labels = value.removesuffix(".").split(".")
+    if (not value or len(value) > 253 or not all(_HOST_LABEL.match(x) for x in labels)
+            or labels[-1].isdigit()):
+        raise ValueError("not an IPv4 address (0.0.0.0: every interface) or a host name "
+                         "(letters, digits, hyphens and dots)")
+    return value
+
+
+IPC_PATH_MAX = 107
+"""Longest ``ipc://`` path ZeroMQ accepts on Linux [bytes]: ``sockaddr_un.sun_path`` less
+its terminating NUL."""
+
+
+def zmq_endpoint(value: str) -> str:
+    """A ZeroMQ endpoint a socket can bind: ``tcp://HOST:PORT`` (HOST ``*``, an IPv4
+    address, ``[IPv6]``, a host or interface name; PORT 1-65535 or ``*`` for any free
+    one), ``ipc://PATH`` or ``inproc://NAME``. ValueError naming what is wrong."""
+    transport, sep, address = value.partition("://")
+    if not sep or transport not in ("tcp", "ipc", "inproc"):
+        raise ValueError("must be a ZeroMQ endpoint: tcp://HOST:PORT, ipc://PATH or "
+                         "inproc://NAME")
+    if transport == "ipc":
+        if not address or "\0" in address or len(address.encode()) > IPC_PATH_MAX:
+            raise ValueError(f"ipc:// needs a path of 1-{IPC_PATH_MAX} bytes (a Unix "
+                             "socket's limit)")
+        return value
+    if transport == "inproc":
+        if not address:
+            raise ValueError("inproc:// needs a name")
+        return value
+    host, colon, port = address.rpartition(":")
+    if not colon or not host:
+        raise ValueError("tcp:// needs HOST:PORT, e.g. tcp://127.0.0.1:5556")
+    if port != "*" and not (port.isdigit() and 1 <= int(port) <= 65535):
+        raise ValueError(f"port {port!r}: a TCP port is 1-65535 (or * for any free one)")
+    if host == "*":
+        return value
+    if host.startswith("[") and host.endswith("]"):
+        try:
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError:
+            raise ValueError(f"{host}: not an IPv6 address") from None
+        return value
+    try:
+        host_address(host)
+    except ValueError:
+        raise ValueError(f"host {host!r}: not *, an IPv4 address, [an IPv6 address], a host "
+                         "name or an interface name") from None
+    return value
+
+
+
+
+def local_endpoint(endpoint: str) -> bool:
+    """Whether a ZeroMQ bind endpoint reaches only this machine: TCP on a loopback address
+    (127.0.0.0/8, ``::1``, ``localhost``, the ``lo`` interface), IPC or in-process.
+    ``tcp://*:5557``, ``tcp://0.0.0.0:5557``, another address or an interface name are not."""
+    transport, sep, address = endpoint.partition("://")
+    if not sep:
+        return False
+    if transport in ("ipc", "inproc"):
+        return True
+    if transport != "tcp":
+        return False
+    host = address.rpartition(":")[0].removeprefix("[").removesuffix("]")
+    if host in ("localhost", "lo"):
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # "*", an interface or a host name
+        return False

@@ -1,1 +1,0 @@
-"""The flight loop: supervisor, flight core, real-time daemon, recorder."""
