@@ -196,12 +196,19 @@ def test_the_floor_has_no_margin_the_ceiling_and_sides_have() -> None:
 
 
 def test_check_config_refuses_a_figure_eight_faster_than_a_tick(tmp_path: Path) -> None:
+    """A lap in a nanosecond is not a period at all (below the shortest motion the vehicle
+    can fly as asked); a lap of half a second is one, refused by its closed form (10.7 m/s
+    at the centre: sqrt(2) a w with a = 0.6 m, w = 4 pi / s)."""
     path = tmp_path / "gs.yaml"
     path.write_text("trajectory:\n  name: figure-eight\n  period_s: 1e-9\n  size_m: 1.2\n")
     result = CliRunner().invoke(app, ["check-config", str(path)])
-    assert result.exit_code == 2
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert "trajectory.period_s: 1e-09: outside [0.2, 3600]" in result.output
+    path.write_text("trajectory:\n  name: figure-eight\n  period_s: 0.5\n  size_m: 1.2\n")
+    result = CliRunner().invoke(app, ["check-config", str(path)])
+    assert result.exit_code == 2 and "Traceback" not in result.output
     assert "cannot be flown" in result.output and "(closed form)" in result.output
-    assert "Traceback" not in result.output
+    assert "speed 10.66 m/s" in result.output
 
 
 @pytest.mark.slow

@@ -12,9 +12,9 @@ from groundstation.config.ranges import (
     FLIGHT_MAX_S,
     LAB_EXTENT_M,
     FilePath,
-    FlightTime,
     LabCoordinate,
     LabLength,
+    LapTime,
     Speed,
     TiltDeg,
     TurnDeg,
@@ -40,7 +40,7 @@ class TrajectoryConfig(ConfigModel):
     # in the lab's frame (from Tracker's origin on the floor), not from the take-off
     # point: a flight climbs above where it stands, then flies here (docs/lab-setup.md)
     size_m: LabLength = 0.75  # square side, Ch. 11.3 (0.75 m x 0.75 m)
-    period_s: FlightTime = 20.0  # one lap, Ch. 11.3
+    period_s: LapTime = 20.0  # one lap, Ch. 11.3
     step_m: LabLength = 0.5  # step amplitude for step-x/y/z, tuned to stay in the volume
     low_height_m: LabLength = 0.02  # low-hover height, Ch. 11.4 (2 cm)
     corner_smoothing_s: Annotated[float, within(

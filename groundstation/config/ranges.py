@@ -248,6 +248,16 @@ keeps the X-3D up for a quarter of it)."""
 
 FlightTime = Annotated[float, within(0.0, FLIGHT_MAX_S, "s: an hour outlasts any battery "
                                      "of the class (FLIGHT_MAX_S)", lo_open=True)]
+
+MIN_MOTION_S = 0.2
+"""Shortest duration or trajectory period accepted [s]: about the vehicle's rate-loop
+rise time (0.14 s, thesis Fig. 3.8) plus its command delay, so nothing shorter can be
+flown as asked; and twenty samples of the feasibility check's 10 ms, so nothing it
+checks moves between two of them."""
+
+LapTime = Annotated[float, within(MIN_MOTION_S, FLIGHT_MAX_S, "s: from the shortest motion "
+                                  "the vehicle can fly as asked (MIN_MOTION_S) to an hour, "
+                                  "which outlasts any battery of the class (FLIGHT_MAX_S)")]
 Speed = Annotated[float, within(0.0, 20.0, "m/s: 20 m/s crosses Table B.1's 3 m volume in "
                                 "0.15 s", lo_open=True)]
 

@@ -6,7 +6,7 @@ an integer of thousands of digits, ``NaN``, ``Infinity`` or ``1e308``. Each fiel
 refused here with ``kind: request`` and a reason unless it is a JSON number a float
 holds exactly enough (an integer within +-2^53, a finite float) and within its physical
 range: headings within one turn, durations and periods within
-[:data:`~groundstation.flight.commander.MIN_MOTION_S`,
+[:data:`~groundstation.config.ranges.MIN_MOTION_S`,
 :data:`~groundstation.flight.commander.MAX_MOTION_S`], ``start_at`` within
 ``api.start_horizon_s`` of now, sizes no larger than the flight volume. Positions must
 lie inside the volume (``kind: volume``, the rule of
@@ -23,10 +23,10 @@ import numpy as np
 from pydantic import ValidationError
 
 from groundstation.config import TrajectoryConfig, describe_problems
+from groundstation.config.ranges import MIN_MOTION_S
 from groundstation.control.feasibility import Volume
 from groundstation.flight.commander import (
     MAX_MOTION_S,
-    MIN_MOTION_S,
     CommandRefusedError,
     check_target,
 )
@@ -167,9 +167,6 @@ def trajectory_section(value: Any, volume: Volume, max_yaw_rate_rad_s: float
         raise _refuse("trajectory: " + describe_problems(exc)) from None
     if section.name in ("none", "waypoints"):
         raise _refuse(f"trajectory: name {section.name!r}: give waypoints as 'waypoints'")
-    if section.period_s < MIN_MOTION_S:
-        raise _refuse(f"trajectory: period_s {section.period_s:g} s: must be at least "
-                      f"{MIN_MOTION_S:g} s")
     extent = [hi - lo for lo, hi in (volume.x, volume.y, volume.z)]
     diagonal = math.hypot(*extent)
     for name, size, most in (("size_m", section.size_m, diagonal),

@@ -48,6 +48,7 @@ from typing import Literal
 
 import numpy as np
 
+from groundstation.config.ranges import MIN_MOTION_S
 from groundstation.control.curve import HoldSet, PieceSet, PolySet
 from groundstation.control.feasibility import FlightLimits, Volume, check_feasibility
 from groundstation.control.minjerk import min_jerk_duration
@@ -71,11 +72,6 @@ arises: a given duration, a trajectory's lap, the approach to a trajectory plus 
 trajectory, a later ``start_at``. It also bounds the work of planning one (the checks
 sample a motion's whole length)."""
 
-MIN_MOTION_S = 0.2
-"""Shortest duration or trajectory period accepted [s]: about the vehicle's rate-loop
-rise time (0.14 s, thesis Fig. 3.8) plus its command delay, so nothing shorter can be
-flown as asked; and twenty samples of the feasibility check's 10 ms, so nothing it
-checks moves between two of them."""
 
 RefusalKind = Literal["request", "state", "volume", "infeasible", "busy", "internal"]
 
