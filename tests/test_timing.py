@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from groundstation.app.timing import TimingHistogram
+from groundstation.timing import TimingHistogram
 
 
 @pytest.mark.parametrize("q", [50.0, 90.0, 99.0, 99.9])

@@ -8,7 +8,8 @@ CLI hands in), :mod:`.inprocess` (:func:`fly_in_process`: the same flight core a
 virtual lab on its simulated clock), :mod:`.recorder` (the flight log), :mod:`.api` (the
 run-time requests), :mod:`.planner_process`, :mod:`.motors` (``gs motors``),
 :mod:`.replay` (``gs replay``), and the OS helpers :mod:`.realtime`, :mod:`.sdnotify`,
-:mod:`.signals`, :mod:`.logdir`, :mod:`.ticklog`, :mod:`.timing`.
+:mod:`.signals`, :mod:`.logdir`, :mod:`.ticklog` (the loop's timing histograms are
+:mod:`groundstation.timing`).
 
 Each takes the flight's parameters (:func:`groundstation.flight.assemble`), never the
 configuration. The flight itself is :mod:`groundstation.flight`.

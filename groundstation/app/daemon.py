@@ -83,7 +83,6 @@ from groundstation.app.recorder import FlightRecorder, LogLoss
 from groundstation.app.sdnotify import SdNotifier
 from groundstation.app.signals import HANGUP_SIGNALS, StopRequests, on_stop_signals
 from groundstation.app.ticklog import TickLogger
-from groundstation.app.timing import TimingHistogram
 from groundstation.asctec.dialect import VehicleLink, open_link
 from groundstation.asctec.stats import LinkStats
 from groundstation.control.base import Controller
@@ -98,6 +97,7 @@ from groundstation.logs import log_through_sink
 from groundstation.telemetry.publisher import TelemetryPublisher
 from groundstation.telemetry.requests import Reply, Request, RequestServer
 from groundstation.telemetry.schema import health_payload, state_payload
+from groundstation.timing import TimingHistogram
 from groundstation.types import Pose
 from groundstation.vicon.receiver import ViconReceiver
 
