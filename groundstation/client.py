@@ -119,6 +119,13 @@ class Infeasible(Refused):
     kind = "infeasible"
 
 
+class TooClose(Refused):
+    """In a fleet: the motion would bring the vehicle closer to another vehicle than the
+    fleet's ``separation_m`` (where the other is, or is planned to be)."""
+
+    kind = "separation"
+
+
 class Busy(Refused):
     """The flight kept changing its plan while this motion was planned, or the daemon's
     planner was starting: try again."""
@@ -148,7 +155,7 @@ class WaitTimeout(ClientError, TimeoutError):  # noqa: N818
 
 _REFUSALS: dict[str, type[Refused]] = {
     cls.kind: cls for cls in (BadRequest, NotNow, OutsideVolume, Infeasible, Busy,
-                              InternalError)}
+                              InternalError, TooClose)}
 
 
 # --------------------------------------------------------------------------- replies

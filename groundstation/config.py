@@ -546,6 +546,11 @@ class ViconConfig(ConfigModel):
     # gap, for a new stream, and before the estimator re-anchors on poses it gated (issue
     # 14: never one pose). 3: 20 ms late at 100 Hz, 0.2 s at 10 Hz; one stray pose is not
     # enough, and a chance agreement of three is as unlikely as the gate allows
+    source: Literal["udp", "zenoh"] = "udp"
+    # where the object's datagrams come from: "udp", Tracker's stream on bind_address:port;
+    # "zenoh", the fleet's `gs vicon-relay`, which receives that stream once for every
+    # vehicle (key <fleet.name>/vicon/<object_name>; needs the fleet: section). Either
+    # way the same pose filter, latency model and failsafes (groundstation/fleet)
 
     @field_validator("object_name")
     @classmethod
@@ -1300,6 +1305,135 @@ class ApiConfig(ConfigModel):
     # how far from now a follow's start_at may be [s]; a few minutes to line up clients
 
 
+# --------------------------------------------------------------------------- fleet
+# Several vehicles on one Vicon (groundstation/fleet, README "Fleet"). A fleet.yaml file
+# (groundstation/fleet/fleetfile.py) writes this section for each of its daemons; a
+# single-vehicle configuration has none. Nothing here imports the fleet package.
+FLEET_NAME = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,31}$"
+"""A fleet's or a vehicle's name: one Zenoh key chunk (letters, digits, - and _; no /,
+*, $, # or ?: those are Zenoh's wildcards and separators)."""
+
+RESERVED_NAMES = ("vicon", "relay")
+"""Key chunks under a fleet's prefix that are not vehicles: the relayed Vicon poses and
+the relay's own health."""
+
+_ZENOH_ENDPOINT = re.compile(r"^(tcp|tls|udp|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):"
+                             r"([0-9]{1,5})$")
+
+
+def zenoh_endpoint(value: str) -> str:
+    """A Zenoh locator ``PROTOCOL/HOST:PORT`` (tcp, tls, udp or quic; HOST an address, a
+    [IPv6] or a name; PORT 0-65535, 0 for any free one). ValueError naming what is
+    wrong."""
+    match = _ZENOH_ENDPOINT.match(value)
+    if match is None:
+        raise ValueError("must be a Zenoh endpoint PROTOCOL/HOST:PORT, e.g. "
+                         "tcp/127.0.0.1:7447 (tcp, tls, udp or quic)")
+    if int(match.group(3)) > 65535:
+        raise ValueError(f"port {match.group(3)}: a port is 0-65535")
+    return value
+
+
+def zenoh_local(endpoint: str) -> bool:
+    """Whether a Zenoh endpoint reaches only this machine: a loopback address (127.0.0.0/8,
+    [::1]) or ``localhost``. ``tcp/0.0.0.0:7447``, another address or a name are not."""
+    host = endpoint.partition("/")[2].rpartition(":")[0].removeprefix("[").removesuffix("]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a host name: it may resolve anywhere
+        return False
+
+
+ZenohEndpoint = Annotated[str, AfterValidator(zenoh_endpoint)]
+FleetName = Annotated[str, Field(pattern=FLEET_NAME)]
+
+
+class ZenohConfig(ConfigModel):
+    """How this process joins the fleet's Zenoh network: peer to peer, no multicast
+    scouting, explicit endpoints. Anything beyond loopback needs TLS with client
+    certificates (mTLS) signed by ``tls_root_ca``; the fleet's access rules are then on,
+    by certificate common name (groundstation/fleet/session.py)."""
+
+    listen: list[ZenohEndpoint] = Field(default_factory=list)
+    # where this process accepts the others' links (a daemon: its own port; a client: none)
+    connect: list[ZenohEndpoint] = Field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
+    # the others' listen endpoints (the relay's and every other daemon's): a full mesh, so
+    # any one process may stop without cutting the others apart; retried while absent
+    tls_root_ca: FilePath | None = None
+    # PEM certificate of the lab's CA: every member's certificate must be signed by it
+    tls_certificate: FilePath | None = None
+    # this process's PEM certificate; its common name is its name in the access rules
+    tls_private_key: FilePath | None = None  # its PEM private key
+    operators: list[FleetName] = Field(default_factory=list)
+    # certificate common names allowed to send requests (go_to, follow, hold, land) and
+    # read telemetry beyond the vehicles themselves (a lab member's laptop, `gs fleet`)
+
+    @model_validator(mode="after")
+    def _access(self) -> ZenohConfig:
+        tls = (self.tls_root_ca, self.tls_certificate, self.tls_private_key)
+        if any(v is not None for v in tls) and not all(v is not None for v in tls):
+            raise FieldValueError("tls_root_ca", self.tls_root_ca, "tls_root_ca, "
+                                  "tls_certificate and tls_private_key go together (mTLS)")
+        secured = self.tls_root_ca is not None
+        for field in ("listen", "connect"):
+            for endpoint in getattr(self, field):
+                if secured and not endpoint.startswith(("tls/", "quic/")) \
+                        and not zenoh_local(endpoint):
+                    raise FieldValueError(field, endpoint, f"{endpoint}: a plain link beyond "
+                                          "loopback: use tls/HOST:PORT with TLS on")
+                if not secured and not zenoh_local(endpoint):
+                    raise FieldValueError(field, endpoint, f"{endpoint} reaches beyond "
+                                          "loopback without TLS: set fleet.zenoh.tls_root_ca, "
+                                          "tls_certificate and tls_private_key (mTLS and the "
+                                          "fleet's access rules), or use tcp/127.0.0.1:PORT")
+        return self
+
+
+class FleetConfig(ConfigModel):
+    """This daemon as one vehicle of a fleet: its keys, its peers and the separation kept
+    between them (README "Fleet")."""
+
+    name: FleetName = "lab"
+    # the key prefix: every key of the fleet is <name>/..., so two fleets on one network
+    # never mix
+    vehicle: FleetName = "x3d"
+    # this vehicle's name: its telemetry and requests are under <name>/<vehicle>/
+    peers: list[FleetName] = Field(default_factory=list)
+    # the other vehicles of the fleet, whose estimated poses this daemon watches
+    separation_m: Annotated[float, within(0.0, LAB_EXTENT_M, "m: a distance within a "
+                                          "lab (LAB_EXTENT_M)", lo_open=True)] | None = None
+    # least distance between two vehicles [m], kept at planning (a motion that would bring
+    # them closer is refused) and in flight (closer: both hold; closer than half of it:
+    # both land). null: off, and then no two vehicles' volumes may overlap (fleet.yaml)
+    separation_hold_s: Annotated[float, within(
+        0.0, 30.0, "s: a hold beside a peer longer than 30 s is a stand-off, not a pause",
+        lo_open=True)] = 3.0
+    # held closer than separation_m this long without the gap opening again: land
+    peer_timeout_s: Annotated[float, within(
+        0.0, 5.0, "s: a peer silent for 5 s may be anywhere a vehicle can fly in 5 s",
+        lo_open=True)] = 0.5
+    # a peer whose pose is older than this is silent: new motions are refused (the one
+    # in progress, already checked, is flown); the Vicon loss-hold time, by analogy
+    pose_rate_hz: Annotated[float, within(
+        0.0, 100.0, "Hz: at most one pose per IMU sample (100 Hz)", lo_open=True)] = 50.0
+    # estimated pose published for the peers' separation checks (the command rate)
+    zenoh: ZenohConfig = ZenohConfig()
+
+    @model_validator(mode="after")
+    def _names(self) -> FleetConfig:
+        for field, names in (("vehicle", [self.vehicle]), ("peers", self.peers)):
+            for name in names:
+                if name in RESERVED_NAMES:
+                    raise FieldValueError(field, name, f"{name!r} is a key of the fleet "
+                                          f"itself ({', '.join(RESERVED_NAMES)}), not a vehicle")
+        if self.vehicle in self.peers or len(set(self.peers)) != len(self.peers):
+            raise FieldValueError("peers", self.peers, "each peer once, and not this "
+                                  "vehicle itself")
+        return self
+
+
 # --------------------------------------------------------------------------- top level
 class GroundStationConfig(ConfigModel):
     """The whole configuration file."""
@@ -1316,9 +1450,18 @@ class GroundStationConfig(ConfigModel):
     logging: LoggingConfig = LoggingConfig()
     realtime: RealtimeConfig = RealtimeConfig()
     api: ApiConfig = ApiConfig()
+    fleet: FleetConfig | None = None
+    # this vehicle in a fleet (fleet.yaml writes it): null flies alone
     sim: SkipValidation[SerializeAsAny[BaseModel] | None] = None
     # the virtual lab's section (config/sim.yaml): the ground station never reads it;
     # validate_config has the installed lab validate it (groundstation.lab)
+
+    @model_validator(mode="after")
+    def _vicon_source(self) -> GroundStationConfig:
+        if self.vicon.source == "zenoh" and self.fleet is None:
+            raise FieldValueError("vicon.source", "zenoh", "takes the poses from the fleet's "
+                                  "relay: it needs a fleet: section (name, zenoh endpoints)")
+        return self
 
 
 # --------------------------------------------------------------------------- loading

@@ -77,7 +77,8 @@ rise time (0.14 s, thesis Fig. 3.8) plus its command delay, so nothing shorter c
 flown as asked; and twenty samples of the feasibility check's 10 ms, so nothing it
 checks moves between two of them."""
 
-RefusalKind = Literal["request", "state", "volume", "infeasible", "busy", "internal"]
+RefusalKind = Literal["request", "state", "volume", "infeasible", "busy", "internal",
+                      "separation"]
 
 
 class CommandRefusedError(GroundStationError):
@@ -94,6 +95,8 @@ class CommandRefusedError(GroundStationError):
     busy : the plan changed while this one was planned, or the planner is starting (try
         again)
     internal : the ground station failed to answer (a fault of ours, logged)
+    separation : it would bring the vehicle closer to a peer of its fleet than
+        ``fleet.separation_m`` (groundstation/fleet/separation.py)
     """
 
     def __init__(self, kind: RefusalKind, reason: str) -> None:

@@ -107,6 +107,9 @@ def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
         pilot_grace_s=pilot_grace_s(config), on_geofence=s.on_geofence,
         on_overruled=s.on_overruled,
         on_second_stream=s.on_second_stream, landing_confirm_s=s.landing_confirm_s,
+        # a fleet's separation (groundstation/fleet): None flies alone
+        separation_m=config.fleet.separation_m if config.fleet is not None else None,
+        separation_hold_s=config.fleet.separation_hold_s if config.fleet is not None else 3.0,
     )
 
 
@@ -373,6 +376,7 @@ class FlightCore:
             vicon_outside=health.vicon_outside, vicon_rivals=health.vicon_rivals,
             overruled=self._overruled_now() if self.init_report is not None else "",
             reference_fault=self._reference_fault, vicon_diagnosis=health.vicon_diagnosis,
+            peer_distance_m=health.peer_distance_m, peer_name=health.peer_name,
         )
 
     def _fresh_vicon(self, health: InputHealth) -> tuple[float, float, float] | None:

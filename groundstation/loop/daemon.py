@@ -66,6 +66,7 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import asdict, dataclass, field
 from functools import partial
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import structlog
@@ -101,6 +102,9 @@ from groundstation.telemetry.publisher import TelemetryPublisher
 from groundstation.telemetry.schema import health_payload, state_payload
 from groundstation.types import Pose
 from groundstation.vicon.client import ViconClient
+
+if TYPE_CHECKING:  # the fleet (groundstation/fleet) is opened only with a fleet: section
+    from groundstation.fleet.node import FleetNode
 
 log = structlog.get_logger(__name__)
 
@@ -274,7 +278,9 @@ class FlightDaemon:
             stack.enter_context(fifo_priority(cfg.realtime.fifo_priority))
             link = open_link(cfg.serial)  # the configured dialect
             stack.callback(link.close)  # sends the final COMMAND with ctrl mask 0
-            vicon = ViconClient.from_config(cfg.vicon, cfg.safety).start()
+            fleet = self._open_fleet(stack)  # a fleet: section: peers, Zenoh (None alone)
+            vicon = (fleet.pose_source() if fleet is not None and cfg.vicon.source == "zenoh"
+                     else ViconClient.from_config(cfg.vicon, cfg.safety)).start()
             stack.callback(vicon.close)
             # the configured directory, else a user's (one line says so): logdir.py
             recorder = create_flight_log(cfg.logging.flight_log_dir, dump_config(cfg),
@@ -288,10 +294,14 @@ class FlightDaemon:
             stack.callback(control.close)
             self.control_endpoint = control.endpoint
             self._control_stats = control.stats
-            if control.endpoint is not None:  # stopped before the socket closes
+            if control.endpoint is not None or fleet is not None:  # stopped before they close
                 if self.core.commander is not None:  # motions planned in a process of its own
                     stack.enter_context(self._planner)
-                stack.enter_context(self._serving(control))
+                if control.endpoint is not None:
+                    stack.enter_context(self._serving(control))
+                if fleet is not None:  # requests as Zenoh queries, the same handler
+                    self._api.guard = fleet
+                    stack.enter_context(fleet.serving(self.handle_request))
             stack.enter_context(on_stop_signals(self._on_signal))
             stack.enter_context(cpu_latency_request(cfg.realtime.cpu_dma_latency_us))
             stack.enter_context(switch_interval(cfg.realtime.switch_interval_ms / 1000.0))
@@ -305,10 +315,10 @@ class FlightDaemon:
                      log=self.log_dir, controller=cfg.controller.type)
             self._front_health = partial(self._health_section, link, vicon)
             try:
-                self._loop(_Io(link, vicon, recorder, telemetry, notifier, pacer))
+                self._loop(_Io(link, vicon, recorder, telemetry, notifier, pacer, fleet))
             finally:
                 self._inbox.close()  # requests now run where they arrive, or are refused
-            self._publish_end(telemetry, link, vicon)
+            self._publish_end(telemetry, link, vicon, fleet)
             stats = link.stats()
             self._stats.max_command_gap = stats.max_command_gap
             self._stats.keepalive_resends = stats.keepalive_resends
@@ -360,6 +370,8 @@ class FlightDaemon:
         vicon_rate, vicon_age = io.vicon.rate_and_age()
         health = with_vicon(self._front.health(start, vicon_age, vicon_rate),
                             io.vicon.evidence(), io.vicon.diagnosis)
+        if io.fleet is not None:  # the nearest peer, for the supervisor's separation rule
+            health = io.fleet.with_peers(health, start, core.last_estimate)
         result = core.tick(start, imu, poses, self._front.status, health, self.stop_requests)
         self._last = result
         clock.t_prev = start
@@ -376,6 +388,9 @@ class FlightDaemon:
         ticklog.record(start, rx.msg if rx is not None else None, imu, poses, result,
                        compute=compute, jitter=start - scheduled, latency=latency)
         io.telemetry.maybe_publish(start, partial(self._snapshot, result, link, io.vicon))
+        if io.fleet is not None:  # the fleet's telemetry and this vehicle's pose for its peers
+            io.fleet.after_tick(start, result, poses,
+                                partial(self._snapshot, result, link, io.vicon))
         self._inbox.run_pending()  # run-time requests, between ticks (loop/api.py)
         if clock.wd_interval is not None and start >= clock.next_wd:
             io.notifier.watchdog()
@@ -438,6 +453,15 @@ class FlightDaemon:
             stop.set()
             server.join(5.0)
 
+    def _open_fleet(self, stack: ExitStack) -> FleetNode | None:
+        """This vehicle's node in its fleet (``fleet:`` section; groundstation/fleet), closed
+        with ``stack``; None without a fleet. FleetError if its session cannot be opened."""
+        if self.config.fleet is None:
+            return None
+        from groundstation.fleet.node import FleetNode
+
+        return stack.enter_context(FleetNode.open(self.config))
+
     def _health_section(self, link: VehicleLink, vicon: ViconClient) -> dict[str, object]:
         """Input health for a status reply: DATA and Vicon rates [Hz] and ages [s], and the
         battery [V]."""
@@ -450,10 +474,10 @@ class FlightDaemon:
                 "pilot_enabled": status.pilot_enabled}
 
     def _publish_end(self, telemetry: TelemetryPublisher, link: VehicleLink,
-                     vicon: ViconClient) -> None:
+                     vicon: ViconClient, fleet: FleetNode | None = None) -> None:
         """Publish the flight's last ``state`` (``final``, with its terminal state, outcome
         and reason) and ``health``, and give subscribers up to :data:`FINAL_LINGER_S` to
-        receive them before the publisher closes."""
+        receive them before the publisher closes; in a fleet on Zenoh too."""
         if self._last is None:
             return
         sup = self.core.supervisor
@@ -466,6 +490,8 @@ class FlightDaemon:
         t = time.monotonic()
         for topic, body in snapshot.items():
             telemetry.publish(topic, body, t)
+        if fleet is not None:
+            fleet.publish_end(snapshot, int(sup.state))
         telemetry.close(linger_s=FINAL_LINGER_S)
 
     def _snapshot(self, result: TickResult, link: VehicleLink, vicon: ViconClient,
@@ -539,6 +565,8 @@ class _Io:
     telemetry: TelemetryPublisher
     notifier: SdNotifier
     pacer: CollectorPacer
+    fleet: FleetNode | None = None
+    """This vehicle's node in a fleet (groundstation/fleet), None alone."""
 
 
 @dataclass
