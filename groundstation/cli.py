@@ -61,6 +61,7 @@ from groundstation.errors import (
     IdentificationError,
     RecorderError,
 )
+from groundstation.fleet.cli import register as register_fleet_commands
 from groundstation.logs import configure_logging
 
 # plain help (rich_markup_mode None): rich markup would eat "[hinf]", "[m]" and "[deg]"
@@ -935,7 +936,8 @@ def synth_hinf(
                f"written to {out}")
 
 
-OPTIONAL_EXTRAS = {"matplotlib": "plot", "cvxpy": "hinf", "mcap": "analysis", "pandas": "analysis"}
+OPTIONAL_EXTRAS = {"matplotlib": "plot", "cvxpy": "hinf", "mcap": "analysis", "pandas": "analysis",
+                   "zenoh": "fleet"}
 """Optional packages and the extra that installs each (pyproject.toml)."""
 
 EXIT_BROKEN_PIPE = 141
@@ -1007,3 +1009,4 @@ def _add_lab_commands() -> None:
 
 _add_lab_commands()
 register_api_commands(app)  # gs goto, land, hold, status (groundstation/cli_api.py)
+register_fleet_commands(app)  # gs fleet ..., gs vicon-relay (groundstation/fleet/cli.py)

@@ -526,3 +526,10 @@ class Client:
         status = self.wait_until_arrived(motion, motion.duration_s + 10.0
                                          if timeout is None else timeout)
         return status.motion or motion
+
+
+# A fleet's vehicles over Zenoh (groundstation/fleet/client.py): Client's methods for each
+# vehicle, and fleet-wide requests. Imported last: they build on Client (zenoh itself is
+# imported only when a Fleet opens its session: the fleet extra).
+from groundstation.fleet.client import Fleet as Fleet  # noqa: E402
+from groundstation.fleet.client import FleetVehicle as FleetVehicle  # noqa: E402

@@ -342,7 +342,7 @@ class FleetNode:
                     waiting.put_nowait((request, query))
                 except queue.Full:
                     self._counts["busy"] += 1
-                    query.reply(query.key_expr, _refusal(
+                    query.reply(keys.request_key(f, v, request), _refusal(
                         "the vehicle has too many requests waiting: try again", "busy"))
             return on_query
 
@@ -377,7 +377,9 @@ class FleetNode:
                     reply = _refusal(f"malformed request: {exc}", "request")
                 else:
                     reply = json.dumps(jsonable(handler(body))).encode()
-                query.reply(query.key_expr, reply)
+                # on its own key: a query for every vehicle (*) gets one reply from each
+                query.reply(keys.request_key(self.fleet.name, self.fleet.vehicle, request),
+                            reply)
                 self._counts["answered"] += 1
             except Exception:  # a fault of ours: the client times out, the flight goes on
                 log.exception("fleet request failed", request=request)

@@ -28,7 +28,6 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from groundstation.types import FloatArray
 
@@ -130,6 +129,8 @@ def check_path(path: FloatArray, step_m: float, own: FloatArray, peers: Sequence
     """Whether a motion along ``path`` ((N, 3) NED [m], steps of at most ``step_m``) from
     this vehicle's position ``own`` keeps ``separation_m`` [m] from every peer (see the
     module docstring). A peer silent for longer than ``timeout_s`` [s] refuses it first."""
+    from scipy.spatial import cKDTree  # here: `gs` imports this module for every command
+
     silent = [p for p in peers if p.silent(timeout_s)]
     if silent:
         names = ", ".join(f"{p.name} ({_age(p.age_s)})" for p in silent)
