@@ -238,10 +238,8 @@ class Fleet:
         except zenoh.ZError as exc:
             raise DaemonUnreachableError(f"the fleet's session failed: {exc}") from exc
         wanted = self.names if vehicle == "*" else [vehicle]
-        for name in wanted:
-            out.setdefault(name, DaemonUnreachableError(
-                f"{name} did not answer {request!r} within {timeout_s:g} s"))
-        return out
+        return {name: out.get(name, DaemonUnreachableError(  # in the fleet file's order
+            f"{name} did not answer {request!r} within {timeout_s:g} s")) for name in wanted}
 
     def telemetry(self, vehicle: str, topics: Sequence[str]) -> _Telemetry:
         """Subscribe to ``vehicle``'s (``*``: every vehicle's) telemetry ``topics``."""
@@ -265,17 +263,25 @@ class Fleet:
             replies = self.query("*", "land", {}, self.timeout_s)
             if not wait:
                 return dict(replies)
-            out: dict[str, Ended | Outcome] = {
-                n: r for n, r in replies.items()
-                if isinstance(r, Exception) or not r.get("ok")}
-            deadline = time.monotonic() + timeout
-            while len(out) < len(self.names) and (left := deadline - time.monotonic()) > 0:
-                message = sub.receive(timeout=left)
-                if message is not None and message[2].get("final") and message[0] not in out:
-                    out[message[0]] = Ended.from_payload(message[2])
-            for name in self.names:
-                out.setdefault(name, WaitTimeout(f"{name} has not ended within {timeout:g} s"))
-            return out
+            refused: dict[str, Ended | Outcome] = {
+                n: r for n, r in replies.items() if isinstance(r, Exception) or not r.get("ok")}
+            return self.until_ended(sub, timeout, refused)
+
+    def until_ended(self, sub: _Telemetry, timeout: float,
+                    known: Mapping[str, Ended | Outcome] | None = None
+                    ) -> dict[str, Ended | Outcome]:
+        """How each vehicle's flight ended, from its final ``state`` on ``sub`` (a
+        subscription to ``telemetry("*", ["state"])`` made before whatever ends them, so
+        that no end is missed), waiting up to ``timeout`` [s]; those in ``known`` are not
+        waited for; a vehicle whose flight has not ended then: WaitTimeout."""
+        out: dict[str, Ended | Outcome] = dict(known or {})
+        deadline = time.monotonic() + timeout
+        while len(out) < len(self.names) and (left := deadline - time.monotonic()) > 0:
+            message = sub.receive(timeout=left)
+            if message is not None and message[2].get("final") and message[0] not in out:
+                out[message[0]] = Ended.from_payload(message[2])
+        return {name: out.get(name, WaitTimeout(f"{name} has not ended within {timeout:g} s"))
+                for name in self.names}
 
     def hold(self) -> dict[str, Outcome]:
         """Ask every vehicle to hold, all at once: each one's reply (or why there is none)."""

@@ -1,0 +1,120 @@
+"""A fleet of three virtual vehicles flown through the relay, end to end.
+
+Every part is a process of its own, as in a lab: ``gs sim-device --fleet`` (three
+virtual X-3Ds on three ptys, one Vicon stream carrying all three objects), ``gs
+vicon-relay`` (the only reader of that stream), three ``gs fleet fly`` daemons taking
+their poses from Zenoh, this test's :class:`groundstation.client.Fleet`, and the ``gs
+fleet`` command line. One flight serves every assertion (a module fixture): the hover
+judged by the virtual lab's ground truth, a motion refused for the separation and one
+accepted, the fleet's status and its landing, each vehicle handed back.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from groundstation.client import Fleet, Status, TooClose
+from groundstation.config import load_config
+from groundstation.fleet.demo import homes
+from groundstation.fleet.judge import rms, tracking
+from groundstation.fleet.virtual import VirtualFleet, write_fleet
+from groundstation.loop.recorder import read_flight
+from groundstation.loop.supervisor import State
+
+REPO = Path(__file__).resolve().parents[1]
+GS = str(Path(sys.executable).parent / "gs")
+SEPARATION_M = 0.5
+
+
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """Three vehicles 1 m apart: take off, hover, one motion refused and one flown, the
+    status from the shell, all landed at once from the shell."""
+    workdir = tmp_path_factory.mktemp("fleet")
+    fleet_file = write_fleet(workdir, load_config(REPO / "config" / "sim.yaml"), homes(3),
+                             separation_m=SEPARATION_M)
+    lines: list[str] = []
+    out: dict[str, Any] = {"lines": lines}
+    with VirtualFleet(fleet_file, echo=lines.append) as vf:
+        with Fleet(vf.run_file) as fleet:
+            out["tracking"] = fleet.wait_for_state("TRACK", timeout=120.0)
+            time.sleep(3.0)  # the hover the truth is judged on
+            out["hover_end"] = time.monotonic()
+            try:  # v1 asked to go 0.3 m from where v2 hovers
+                fleet["v1"].go_to([-0.3, 0.0, -1.0])
+            except TooClose as exc:
+                out["refused"] = exc
+            out["accepted"] = fleet["v1"].go_to([-1.0, 0.4, -1.2], wait=True, timeout=20.0)
+            out["status"] = subprocess.run([GS, "fleet", "status", str(vf.run_file)],
+                                           capture_output=True, text=True, timeout=30)
+        out["land"] = subprocess.run([GS, "fleet", "land", str(vf.run_file), "--wait"],
+                                     capture_output=True, text=True, timeout=90)
+        out["codes"] = vf.wait()
+    out["logs"] = {name: vf.log_dir(name) for name in vf.names}
+    out["truth"] = dict(vf.truth_files)
+    return out
+
+
+@pytest.mark.realtime
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+def test_each_vehicle_hovers_within_a_centimetre_of_its_reference(flown: dict[str, Any]
+                                                                  ) -> None:
+    for name, log in flown["logs"].items():
+        track = tracking(log, flown["truth"][name])
+        hover = track.window(State.TRACK, start_after_s=1.0, at_rest=True)
+        hover = hover[: int(np.searchsorted(track.t[track.state == int(State.TRACK)],
+                                            flown["hover_end"]))]
+        assert len(hover) > 150, name  # at least 1.5 s of 100 Hz rows
+        assert rms(hover) < 0.01, (name, rms(hover))
+        assert np.percentile(hover, 95) < 0.01, (name, np.percentile(hover, 95))
+
+
+@pytest.mark.realtime
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+def test_a_motion_towards_a_peer_is_refused_one_that_keeps_clear_flies(
+        flown: dict[str, Any]) -> None:
+    refused = flown["refused"]
+    assert isinstance(refused, TooClose), flown["lines"][-40:]
+    assert refused.kind == "separation" and "v2" in refused.reason
+    assert "0.50 m" in refused.reason  # fleet.separation_m named
+    accepted = flown["accepted"]
+    assert accepted.state == "arrived" and accepted.kind == "go_to"
+    track = tracking(flown["logs"]["v1"], flown["truth"]["v1"])
+    assert np.min(np.linalg.norm(track.truth - [-1.0, 0.4, -1.2], axis=1)) < 0.02
+
+
+@pytest.mark.realtime
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+def test_the_fleet_answers_its_status_and_lands_as_one(flown: dict[str, Any]) -> None:
+    assert all(isinstance(s, Status) for s in flown["tracking"].values())
+    status = flown["status"]
+    assert status.returncode == 0, status.stdout + status.stderr
+    assert [line.split(":")[0] for line in status.stdout.splitlines()] == ["v1", "v2", "v3"]
+    assert all(" TRACK " in f" {line} " for line in status.stdout.splitlines())
+    land = flown["land"]
+    assert land.returncode == 0, land.stdout + land.stderr
+    assert land.stdout.count("ended DONE (COMPLETED)") == 3
+    assert flown["codes"] == {"v1": 0, "v2": 0, "v3": 0}
+
+
+@pytest.mark.realtime
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+def test_each_vehicle_is_handed_back_on_the_floor(flown: dict[str, Any]) -> None:
+    for name, log in flown["logs"].items():
+        rows, meta, _ = read_flight(log)
+        assert meta["outcome"]["final_state"] == "DONE", (name, meta["outcome"])
+        assert rows["cmd_mask"][-1] == 0, name
+        truth = np.load(flown["truth"][name])
+        assert truth["position"][-1][2] > -0.02, name  # on the floor
+        assert truth["ctrl_mask"][-1] == 0, name  # the vehicle applies the pilot's sticks
