@@ -65,6 +65,9 @@ from groundstation.errors import ConfigError
 from groundstation.fleet import keys
 from groundstation.fleet.separation import Box, volumes_overlap
 
+_FLEET = FleetConfig()
+"""The fleet section's defaults (groundstation/config.py), which the file's keys take."""
+
 DEFAULT_RELAY = "tcp/127.0.0.1:7447"
 """Where the relay listens unless the file says."""
 
@@ -135,15 +138,26 @@ class FleetFile(ConfigModel):
 
     fleet: FleetName = "lab"
     base: Path
-    separation_m: Annotated[float, within(0.0, 100.0, "m: a distance within a lab",
-                                          lo_open=True)] | None = None
-    separation_hold_s: Annotated[float, within(0.0, 30.0, "s", lo_open=True)] = 3.0
-    peer_timeout_s: Annotated[float, within(0.0, 5.0, "s", lo_open=True)] = 0.5
+    separation_m: float | None = None  # fleet.separation_m, checked there
+    separation_hold_s: float = _FLEET.separation_hold_s  # likewise
+    peer_timeout_s: float = _FLEET.peer_timeout_s  # likewise
     hover_height_m: Annotated[float, within(0.0, 100.0, "m: above the floor",
                                             lo_open=True)] | None = None
     relay: RelaySpec | None = RelaySpec()
     zenoh: ZenohSpec = ZenohSpec()
     vehicles: list[VehicleSpec] = Field(min_length=1, max_length=MAX_FLEET)
+
+    @model_validator(mode="after")
+    def _fleet_keys(self) -> FleetFile:
+        """The keys every daemon's ``fleet:`` section takes, checked as it checks them."""
+        try:
+            FleetConfig(name=self.fleet, separation_m=self.separation_m,
+                        separation_hold_s=self.separation_hold_s,
+                        peer_timeout_s=self.peer_timeout_s)
+        except ValidationError as exc:
+            path, value, reason = _problems(exc)[0]
+            raise FieldValueError(path, value, reason) from None
+        return self
 
     # ------------------------------------------------------------------ derived
     @property

@@ -146,7 +146,7 @@ def check_path(path: FloatArray, step_m: float, own: FloatArray, peers: Sequence
         dist, _ = tree.query(path)
         closest = int(np.argmin(dist))
         d_path = float(dist[closest]) - margin
-        d_now = float(tree.query(np.asarray(own, dtype=float))[0]) - 0.5 * peer.step_m
+        d_now = float(tree.query(np.asarray(own, dtype=float))[0]) - margin
         if d_path < separation_m and d_path < d_now - GAP_TOLERANCE_M:
             x, y, z = path[closest]
             return PathCheck("separation", (

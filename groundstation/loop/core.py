@@ -109,7 +109,8 @@ def limits_from_config(config: GroundStationConfig) -> SupervisorLimits:
         on_second_stream=s.on_second_stream, landing_confirm_s=s.landing_confirm_s,
         # a fleet's separation (groundstation/fleet): None flies alone
         separation_m=config.fleet.separation_m if config.fleet is not None else None,
-        separation_hold_s=config.fleet.separation_hold_s if config.fleet is not None else 3.0,
+        separation_hold_s=config.fleet.separation_hold_s if config.fleet is not None
+        else SupervisorLimits().separation_hold_s,
     )
 
 
