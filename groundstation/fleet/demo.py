@@ -13,6 +13,7 @@ on throughout.
 
 from __future__ import annotations
 
+import json
 import math
 import threading
 import time
@@ -42,6 +43,22 @@ def homes(n: int) -> list[tuple[float, float]]:
     return [((k - (n - 1) / 2.0) * SPACING_M, 0.0) for k in range(n)]
 
 
+def quiet(echo: Callable[[str], None]) -> Callable[[str], None]:
+    """``echo`` without the processes' JSON log events below warning (the progress lines,
+    the summaries and every warning or error still go through)."""
+    def say(line: str) -> None:
+        _, sep, rest = line.partition("] ")
+        if sep and rest.startswith("{"):
+            try:
+                level = json.loads(rest).get("level")
+            except ValueError:
+                level = None
+            if level in ("debug", "info"):
+                return
+        echo(line)
+    return say
+
+
 def run_demo(config: Path, n: int, workdir: Path, *, echo: Callable[[str], None],
              stop: threading.Event) -> dict[str, int]:
     """Fly the demo (see the module docstring); each daemon's exit code."""
@@ -53,7 +70,7 @@ def run_demo(config: Path, n: int, workdir: Path, *, echo: Callable[[str], None]
                           "(config/sim.yaml)")
     fleet_file = write_fleet(workdir, base, homes(n), separation_m=0.4)
     echo(f"fleet file: {fleet_file}")
-    with VirtualFleet(fleet_file, echo=echo) as vf:
+    with VirtualFleet(fleet_file, echo=quiet(echo)) as vf:
         with Fleet(vf.run_file) as fleet:
             fleet.wait_for_state("TRACK", timeout=TAKEOFF_WAIT_S)
             start = time.time() + START_IN_S
