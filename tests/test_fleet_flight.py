@@ -6,7 +6,8 @@ vicon-relay`` (the only reader of that stream), three ``gs fleet fly`` daemons t
 their poses from Zenoh, this test's :class:`groundstation.client.Fleet`, and the ``gs
 fleet`` command line. One flight serves every assertion (a module fixture): the hover
 judged by the virtual lab's ground truth, a motion refused for the separation and one
-accepted, the fleet's status and its landing, each vehicle handed back.
+accepted, the fleet's status, ``examples/fleet_eight.py`` (three figure-eights in phase,
+then every vehicle landed at once), each vehicle handed back.
 """
 
 from __future__ import annotations
@@ -30,13 +31,13 @@ from groundstation.loop.supervisor import State
 
 REPO = Path(__file__).resolve().parents[1]
 GS = str(Path(sys.executable).parent / "gs")
-SEPARATION_M = 0.5
+SEPARATION_M = 0.4  # the eights of examples/fleet_eight.py keep 0.5 m
 
 
 @pytest.fixture(scope="module")
 def flown(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """Three vehicles 1 m apart: take off, hover, one motion refused and one flown, the
-    status from the shell, all landed at once from the shell."""
+    status from the shell, the example's eights in phase and its landing."""
     workdir = tmp_path_factory.mktemp("fleet")
     fleet_file = write_fleet(workdir, load_config(REPO / "config" / "sim.yaml"), homes(3),
                              separation_m=SEPARATION_M)
@@ -54,8 +55,10 @@ def flown(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
             out["accepted"] = fleet["v1"].go_to([-1.0, 0.4, -1.2], wait=True, timeout=20.0)
             out["status"] = subprocess.run([GS, "fleet", "status", str(vf.run_file)],
                                            capture_output=True, text=True, timeout=30)
-        out["land"] = subprocess.run([GS, "fleet", "land", str(vf.run_file), "--wait"],
-                                     capture_output=True, text=True, timeout=90)
+        out["example_start"] = time.monotonic()
+        out["example"] = subprocess.run(
+            [sys.executable, str(REPO / "examples" / "fleet_eight.py"), str(vf.run_file)],
+            capture_output=True, text=True, timeout=180)
         out["codes"] = vf.wait()
     out["logs"] = {name: vf.log_dir(name) for name in vf.names}
     out["truth"] = dict(vf.truth_files)
@@ -85,7 +88,7 @@ def test_a_motion_towards_a_peer_is_refused_one_that_keeps_clear_flies(
     refused = flown["refused"]
     assert isinstance(refused, TooClose), flown["lines"][-40:]
     assert refused.kind == "separation" and "v2" in refused.reason
-    assert "0.50 m" in refused.reason  # fleet.separation_m named
+    assert "0.40 m" in refused.reason  # fleet.separation_m named
     accepted = flown["accepted"]
     assert accepted.state == "arrived" and accepted.kind == "go_to"
     track = tracking(flown["logs"]["v1"], flown["truth"]["v1"])
@@ -95,15 +98,17 @@ def test_a_motion_towards_a_peer_is_refused_one_that_keeps_clear_flies(
 @pytest.mark.realtime
 @pytest.mark.slow
 @pytest.mark.timeout(400)
-def test_the_fleet_answers_its_status_and_lands_as_one(flown: dict[str, Any]) -> None:
+def test_the_fleet_answers_its_status_flies_in_phase_and_lands_as_one(
+        flown: dict[str, Any]) -> None:
     assert all(isinstance(s, Status) for s in flown["tracking"].values())
     status = flown["status"]
     assert status.returncode == 0, status.stdout + status.stderr
     assert [line.split(":")[0] for line in status.stdout.splitlines()] == ["v1", "v2", "v3"]
     assert all(" TRACK " in f" {line} " for line in status.stdout.splitlines())
-    land = flown["land"]
-    assert land.returncode == 0, land.stdout + land.stderr
-    assert land.stdout.count("ended DONE (COMPLETED)") == 3
+    example = flown["example"]
+    assert example.returncode == 0, example.stdout + example.stderr
+    assert example.stdout.count("lap flown") == 3
+    assert example.stdout.count("outcome='COMPLETED'") == 3
     assert flown["codes"] == {"v1": 0, "v2": 0, "v3": 0}
 
 
@@ -118,3 +123,21 @@ def test_each_vehicle_is_handed_back_on_the_floor(flown: dict[str, Any]) -> None
         truth = np.load(flown["truth"][name])
         assert truth["position"][-1][2] > -0.02, name  # on the floor
         assert truth["ctrl_mask"][-1] == 0, name  # the vehicle applies the pilot's sticks
+
+
+@pytest.mark.realtime
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+def test_the_three_eights_are_flown_in_phase(flown: dict[str, Any]) -> None:
+    """Each reference reaches its eight's east-most point (0.5 m east of its centre) at
+    the same moment, and the truth follows it within a few centimetres."""
+    peaks = []
+    for name, log in flown["logs"].items():
+        track = tracking(log, flown["truth"][name])
+        after = (track.t > flown["example_start"]) & (track.state == int(State.TRACK))
+        east = track.reference[after, 1]
+        centre = 0.5 * (east.max() + east.min())  # its hover point: the eight's centre
+        assert east.max() - centre == pytest.approx(0.5, abs=1e-3), name  # 1 m wide
+        peaks.append(track.t[after][int(np.argmax(east - centre > 0.5 - 1e-3))])
+        assert np.percentile(track.error[after], 95) < 0.03, name
+    assert max(peaks) - min(peaks) < 0.05, peaks  # in phase: within 50 ms

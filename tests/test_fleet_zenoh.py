@@ -305,3 +305,46 @@ def test_tls_and_the_access_rules_decide_who_may_say_what(tmp_path: Path) -> Non
             s.undeclare()
         for session in (forged, *others.values(), v1):
             session.close()
+
+
+@pytest.mark.slow
+def test_gs_fleet_land_asks_every_vehicle_at_once_and_waits_for_their_ends(tmp_path: Path
+                                                                           ) -> None:
+    """Both vehicles get one land query; with --wait their final ``state`` messages end
+    it (exit 0 when both ended DONE, COMPLETED); a vehicle that does not answer is named
+    and exit 1."""
+    import threading
+
+    from typer.testing import CliRunner
+
+    from groundstation.cli import app
+
+    path, configs = fleet_config(tmp_path)
+    final = {"state": {"supervisor": {"state": 6, "name": "DONE"}, "final": True,
+                       "outcome": "COMPLETED", "reason": "landed and disarmed"}}
+
+    def lands(node: FleetNode) -> Callable[[dict[str, Any]], dict[str, Any]]:
+        def answer(request: dict[str, Any]) -> dict[str, Any]:
+            if request["request"] == "land":
+                threading.Timer(0.3, node.publish_end, (final, 6)).start()
+            return {"ok": True, "state": "TRACK"}
+        return answer
+
+    with FleetNode.open(configs["v1"]) as n1, FleetNode.open(configs["v2"]) as n2, \
+            n1.serving(lands(n1)), n2.serving(lands(n2)):
+        with Fleet(path) as probe:
+            assert until(lambda: all(isinstance(r, dict) for r in
+                                     probe.query("*", "status", {}, 1.0).values()))
+        result = CliRunner().invoke(app, ["fleet", "land", str(path), "--wait",
+                                          "--wait-timeout", "10"])
+        time.sleep(0.5)  # the timers' messages are out before the nodes close
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines() == [
+        "v1: ended DONE (COMPLETED): landed and disarmed",
+        "v2: ended DONE (COMPLETED): landed and disarmed"]
+    with FleetNode.open(configs["v1"]) as n1, n1.serving(lands(n1)):
+        result = CliRunner().invoke(app, ["fleet", "land", str(path), "--timeout", "1"])
+        time.sleep(0.5)
+    assert result.exit_code == 1
+    assert "v1: landing (from TRACK)" in result.output
+    assert "v2: v2 did not answer 'land' within 1 s" in result.output

@@ -150,8 +150,9 @@ def up(
     vehicle: Annotated[list[str] | None, typer.Option(
         help="Fly only this vehicle (repeatable; default: every vehicle whose host is this "
              "PC or unset).")] = None,
-    relay: Annotated[bool, typer.Option(
-        help="Start the relay too, if the fleet has one and its host is this PC.")] = True,
+    no_relay: Annotated[bool, typer.Option(
+        "--no-relay", help="Do not start the relay (by default it starts here if the "
+                           "fleet has one and its host is this PC).")] = False,
 ) -> None:
     """Start this PC's part of the fleet: the relay, then one daemon per vehicle, each a
     process of its own; their lines are echoed with their names. Ctrl-C (SIGINT,
@@ -170,7 +171,7 @@ def up(
     for name in names:
         if name not in spec.names:
             raise fail(f"--vehicle {name}: not in the fleet ({', '.join(spec.names)})", 2)
-    start_relay = relay and spec.relay is not None and on_this_host(spec.relay.host)
+    start_relay = not no_relay and spec.relay is not None and on_this_host(spec.relay.host)
     if not names and not start_relay:
         raise fail(f"{fleet}: nothing of the fleet runs on this host", 2)
     processes = FleetProcesses(fleet, names, relay=start_relay, echo=typer.echo)
