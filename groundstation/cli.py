@@ -26,6 +26,7 @@ import typer
 
 from groundstation import __version__
 from groundstation.cli_api import register as register_api_commands
+from groundstation.cli_fleet import register as register_fleet_commands
 from groundstation.cli_options import (
     REPLY_TIMEOUT_S,
     TRAJECTORY_CHOICES,
@@ -61,7 +62,6 @@ from groundstation.errors import (
     IdentificationError,
     RecorderError,
 )
-from groundstation.fleet.cli import register as register_fleet_commands
 from groundstation.logs import configure_logging
 
 # plain help (rich_markup_mode None): rich markup would eat "[hinf]", "[m]" and "[deg]"
@@ -1009,4 +1009,4 @@ def _add_lab_commands() -> None:
 
 _add_lab_commands()
 register_api_commands(app)  # gs goto, land, hold, status (groundstation/cli_api.py)
-register_fleet_commands(app)  # gs fleet ..., gs vicon-relay (groundstation/fleet/cli.py)
+register_fleet_commands(app)  # gs fleet ..., gs vicon-relay (groundstation/cli_fleet.py)

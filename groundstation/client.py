@@ -42,10 +42,14 @@ import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from groundstation.errors import GroundStationError
 from groundstation.telemetry.client import TelemetryClient
+
+if TYPE_CHECKING:  # the fleet's client, imported on first use (``__getattr__`` below)
+    from groundstation.fleet.client import Fleet as Fleet
+    from groundstation.fleet.client import FleetVehicle as FleetVehicle
 from groundstation.telemetry.control import send_request
 from groundstation.telemetry.curve import CurveClient, load_client_keys
 
@@ -528,8 +532,13 @@ class Client:
         return status.motion or motion
 
 
-# A fleet's vehicles over Zenoh (groundstation/fleet/client.py): Client's methods for each
-# vehicle, and fleet-wide requests. Imported last: they build on Client (zenoh itself is
-# imported only when a Fleet opens its session: the fleet extra).
-from groundstation.fleet.client import Fleet as Fleet  # noqa: E402
-from groundstation.fleet.client import FleetVehicle as FleetVehicle  # noqa: E402
+def __getattr__(name: str) -> Any:
+    """``Fleet`` and ``FleetVehicle``: a fleet's vehicles over Zenoh (groundstation/fleet/
+    client.py), Client's methods for each vehicle and fleet-wide requests. Imported on first
+    use: they build on this module's Client, and need the fleet extra only once a Fleet
+    opens its session."""
+    if name in ("Fleet", "FleetVehicle"):
+        from groundstation.fleet import client as fleet_client
+
+        return getattr(fleet_client, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

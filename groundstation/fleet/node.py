@@ -176,8 +176,12 @@ class FleetNode:
         vehicle's estimate, for the supervisor's separation rule."""
         if estimate is None:
             return health
-        distance, name = nearest(estimate.position, self.peers.views(now),
-                                 self.fleet.peer_timeout_s)
+        try:
+            distance, name = nearest(estimate.position, self.peers.views(now),
+                                     self.fleet.peer_timeout_s)
+        except Exception:  # a fault of ours: no peer this tick, logged once; never the loop
+            self._failed("the peers could not be read")
+            return health
         return replace(health, peer_distance_m=distance, peer_name=name)
 
     def after_tick(self, t: float, result: TickResult, poses: Sequence[Pose],

@@ -110,6 +110,14 @@ class ZenohPoseSource(ViconClient):
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         """Zenoh's callback: one relayed item -> the pose filter (never raises)."""
+        try:
+            self._receive(sample)
+        except Exception as exc:  # a fault of ours: counted and logged, the stream goes on
+            with self._cond:
+                self.malformed += 1
+            log.warning("relayed pose not taken", error=repr(exc))
+
+    def _receive(self, sample: zenoh.Sample) -> None:
         now = self._clock()
         if self._closed:
             return
