@@ -279,7 +279,7 @@ class FlightDaemon:
             link = open_link(cfg.serial)  # the configured dialect
             stack.callback(link.close)  # sends the final COMMAND with ctrl mask 0
             fleet = self._open_fleet(stack)  # a fleet: section: peers, Zenoh (None alone)
-            vicon = (fleet.pose_source() if fleet is not None and cfg.vicon.source == "zenoh"
+            vicon = (fleet.pose_source() if cfg.vicon.source == "zenoh" and fleet is not None
                      else ViconClient.from_config(cfg.vicon, cfg.safety)).start()
             stack.callback(vicon.close)
             # the configured directory, else a user's (one line says so): logdir.py
