@@ -16,7 +16,8 @@ vehicle instead (``config/groundstation@.service``).
 
 Exit code (:func:`fleet_exit_code`): 0 when every daemon exited 0; else the most urgent
 of their codes in the order 1 (a failsafe), 5 (a log incomplete), 3 (could not start),
-2 (configuration), 4 (stopped on request).
+2 (configuration), 4 (stopped on request); a daemon killed by a signal (or any other
+code) counts as 1: its vehicle's watchdog handed it back.
 """
 
 from __future__ import annotations
@@ -50,10 +51,9 @@ def fleet_exit_code(codes: Mapping[str, int]) -> int:
     values = set(codes.values())
     if values <= {0}:
         return 0
-    for code in URGENCY:
-        if code in values:
-            return code
-    return max(values)
+    if values - {0, *URGENCY}:  # killed by a signal, or a crash: its watchdog handed back
+        return 1
+    return next(code for code in URGENCY if code in values)
 
 
 def gs_command() -> list[str]:
