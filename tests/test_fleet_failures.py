@@ -38,7 +38,7 @@ def _transitions(log: Path) -> list[tuple[str, str]]:
 
 
 @pytest.fixture(scope="module")
-def killed(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+def killed(tmp_path_factory: pytest.TempPathFactory, fleet_alone: None) -> dict[str, Any]:
     """Three vehicles hover; v3's daemon is killed; later the relay is killed."""
     workdir = tmp_path_factory.mktemp("fleet-killed")
     fleet_file = write_fleet(workdir, load_config(REPO / "config" / "sim.yaml"),
@@ -108,7 +108,7 @@ def test_the_relay_killed_is_a_vicon_loss_for_every_daemon(killed: dict[str, Any
 
 
 @pytest.fixture(scope="module")
-def drifted(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+def drifted(tmp_path_factory: pytest.TempPathFactory, fleet_alone: None) -> dict[str, Any]:
     """Two vehicles 0.7 m apart (separation 0.6 m); v2's pitch goes to the virtual pilot,
     whose pitch stick sits at +10 (0.011 rad/s nose up: it accelerates towards v1)."""
     workdir = tmp_path_factory.mktemp("fleet-drift")

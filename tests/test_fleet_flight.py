@@ -35,7 +35,7 @@ SEPARATION_M = 0.4  # the eights of examples/fleet_eight.py keep 0.5 m
 
 
 @pytest.fixture(scope="module")
-def flown(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+def flown(tmp_path_factory: pytest.TempPathFactory, fleet_alone: None) -> dict[str, Any]:
     """Three vehicles 1 m apart: take off, hover, one motion refused and one flown, the
     status from the shell, the example's eights in phase and its landing."""
     workdir = tmp_path_factory.mktemp("fleet")
@@ -130,7 +130,9 @@ def test_each_vehicle_is_handed_back_on_the_floor(flown: dict[str, Any]) -> None
 @pytest.mark.timeout(400)
 def test_the_three_eights_are_flown_in_phase(flown: dict[str, Any]) -> None:
     """Each reference reaches its eight's east-most point (0.5 m east of its centre) at
-    the same moment, and the truth follows it within a few centimetres."""
+    the same moment, and the truth follows it (0.3 cm RMS on a quiet machine; a few
+    centimetres at worst on one loaded by other work: a vehicle that did not fly its
+    eight would be half a metre off)."""
     peaks = []
     for name, log in flown["logs"].items():
         track = tracking(log, flown["truth"][name])
@@ -139,5 +141,5 @@ def test_the_three_eights_are_flown_in_phase(flown: dict[str, Any]) -> None:
         centre = 0.5 * (east.max() + east.min())  # its hover point: the eight's centre
         assert east.max() - centre == pytest.approx(0.5, abs=1e-3), name  # 1 m wide
         peaks.append(track.t[after][int(np.argmax(east - centre > 0.5 - 1e-3))])
-        assert np.percentile(track.error[after], 95) < 0.03, name
+        assert rms(track.error[after]) < 0.03, name
     assert max(peaks) - min(peaks) < 0.05, peaks  # in phase: within 50 ms
