@@ -46,12 +46,12 @@ from typing import TYPE_CHECKING, Any
 
 from groundstation.errors import GroundStationError
 from groundstation.telemetry.client import TelemetryClient
+from groundstation.telemetry.control import send_request
+from groundstation.telemetry.curve import CurveClient, load_client_keys
 
 if TYPE_CHECKING:  # the fleet's client, imported on first use (``__getattr__`` below)
     from groundstation.fleet.client import Fleet as Fleet
     from groundstation.fleet.client import FleetVehicle as FleetVehicle
-from groundstation.telemetry.control import send_request
-from groundstation.telemetry.curve import CurveClient, load_client_keys
 
 DEFAULT_CONTROL = "tcp://127.0.0.1:5557"
 """The daemon's default ``telemetry.control_endpoint``."""
