@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from test_config_keys_read import leaves, recording
 
 from groundstation.config import FleetConfig, ZenohConfig, load_config
@@ -24,6 +25,7 @@ from groundstation.loop.core import limits_from_config
 REPO = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow  # a Zenoh session waits 0.5 s for the relay that is not there
 def test_every_fleet_key_is_read(tmp_path: Path) -> None:
     spec, base = load_fleet(write_fleet(tmp_path, load_config(REPO / "config" / "sim.yaml"),
                                         [(0.0, 0.0)], separation_m=0.5))
