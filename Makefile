@@ -37,10 +37,16 @@ test: lint typecheck pytest
 test-fast: install
 	$(BIN)/pytest -q -n 2 -m "not realtime and not virtual_vehicle and not slow"
 
-# `make demo PROTOCOL=asctec-ll` flies the virtual AscTec LL vehicle instead of the X-3D
+# `make demo PROTOCOL=asctec-ll` flies the virtual AscTec LL vehicle instead of the X-3D;
+# `make demo FLEET=3` a virtual fleet through the Vicon relay (README "Fleet")
 PROTOCOL ?= x3d
+FLEET ?=
 demo: install
+ifeq ($(FLEET),)
 	$(BIN)/gs fly --config config/sim.yaml --demo --protocol $(PROTOCOL)
+else
+	$(BIN)/gs fleet demo --vehicles $(FLEET) --config config/sim.yaml
+endif
 
 bench: install
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

@@ -26,8 +26,11 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("config", "asctec", "vicon", "estimation", "control"),  # the YAML schema; the pure
     # codecs, filters and controllers with their plain parameter records: none knows another
     ("telemetry", "lab"),  # the publisher, request socket and schema; the virtual lab's face
-    ("flight", "client"),  # the flight without I/O and its assembly; the Python client
-    ("app",),  # the real-time daemon, gs fly, the in-process runner, the recorder
+    ("flight",),  # the flight without I/O and its assembly
+    ("fleet",),  # a vehicle's part in a fleet: Zenoh session, relay, pose source, peers, node
+    ("app", "client"),  # the real-time daemon, gs fly, the in-process runner, the recorder;
+    # the Python clients of one vehicle and of a fleet
+    ("fleetops",),  # running a fleet: gs fleet up's processes, the virtual fleet, the demo
     ("evaluation", "export"),  # after a flight: metrics, figures, reports; CSV/Parquet/MCAP
     ("identification", "calibration", "linkcheck"),  # the lab's measuring tools
     ("cli",),  # the gs command

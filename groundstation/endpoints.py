@@ -1,9 +1,10 @@
-"""Network endpoints: what a UDP host address and a ZeroMQ endpoint are, and whether an
-endpoint reaches only this machine.
+"""Network endpoints: what a UDP host address, a ZeroMQ endpoint and a Zenoh endpoint
+are, and whether an endpoint reaches only this machine.
 
 The configuration checks the addresses it is given with these (``vicon.bind_address``,
-``telemetry.endpoint``, ``telemetry.control_endpoint``), and the request socket refuses,
-with the same rule, to serve beyond loopback without authentication.
+``telemetry.endpoint``, ``telemetry.control_endpoint``, ``fleet.zenoh.listen`` and
+``connect``), and the request socket refuses, with the same rule, to serve beyond
+loopback without authentication, as a fleet's Zenoh network does without TLS.
 """
 
 from __future__ import annotations
@@ -96,4 +97,33 @@ def local_endpoint(endpoint: str) -> bool:
     try:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:  # "*", an interface or a host name
+        return False
+
+
+_ZENOH_ENDPOINT = re.compile(r"^(tcp|tls|udp|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):"
+                             r"([0-9]{1,5})$")
+
+
+def zenoh_endpoint(value: str) -> str:
+    """A Zenoh locator ``PROTOCOL/HOST:PORT`` (tcp, tls, udp or quic; HOST an address, a
+    [IPv6] or a name; PORT 0-65535, 0 for any free one). ValueError naming what is
+    wrong."""
+    match = _ZENOH_ENDPOINT.match(value)
+    if match is None:
+        raise ValueError("must be a Zenoh endpoint PROTOCOL/HOST:PORT, e.g. "
+                         "tcp/127.0.0.1:7447 (tcp, tls, udp or quic)")
+    if int(match.group(3)) > 65535:
+        raise ValueError(f"port {match.group(3)}: a port is 0-65535")
+    return value
+
+
+def zenoh_local(endpoint: str) -> bool:
+    """Whether a Zenoh endpoint reaches only this machine: a loopback address (127.0.0.0/8,
+    [::1]) or ``localhost``. ``tcp/0.0.0.0:7447``, another address or a name are not."""
+    host = endpoint.partition("/")[2].rpartition(":")[0].removeprefix("[").removesuffix("]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a host name: it may resolve anywhere
         return False

@@ -16,6 +16,7 @@ Tree::
     │   └── LinkTimeoutError(TimeoutError) no DATA within the expected time
     ├── ViconError(OSError)               UDP socket could not be bound or read
     ├── TelemetryError(OSError)           telemetry socket could not be bound or connected
+    ├── FleetError(OSError)               the fleet's Zenoh session could not be opened or used
     ├── RecorderError(OSError)            flight log could not be written or read
     ├── EstimatorError(ArithmeticError)   estimator diverged or lost numerical soundness
     ├── ControlError                      controller could not be built or evaluated
@@ -63,6 +64,11 @@ class ViconError(GroundStationError, OSError):
 
 class TelemetryError(GroundStationError, OSError):
     """The telemetry (pyzmq) socket could not be bound or connected, or is closed."""
+
+
+class FleetError(GroundStationError, OSError):
+    """The fleet's Zenoh session could not be opened (a port taken, a certificate that
+    cannot be read) or used (groundstation/fleet)."""
 
 
 class RecorderError(GroundStationError, OSError):

@@ -60,6 +60,13 @@ def sim_device(
                        "serial_port, vicon_target, truth_file).")] = False,
     protocol: ProtocolOption = None,
     duration: DurationAlias = None,
+    vehicles: Annotated[int | None, typer.Option(
+        "--vehicles", min=1, max=64,
+        help="A virtual fleet: N vehicles v1..vN (objects X3D-1..X3D-N, 1 m apart along "
+             "north), each on its own pty, all in one Vicon stream.")] = None,
+    fleet: Annotated[Path | None, typer.Option(
+        "--fleet", help="A virtual fleet: the vehicles of this fleet.yaml, each as its "
+                        "daemon flies it (its object, home and sim overrides).")] = None,
 ) -> None:
     """Run the virtual X-3D (pty) and virtual Vicon (UDP) in real time until Ctrl-C.
 
@@ -67,10 +74,21 @@ def sim_device(
     writes the ground truth on exit (also on SIGINT/SIGTERM). With `--json` the first
     line is the same as JSON (`groundstation.lab.Announcement`). With `--protocol
     asctec-ll` the vehicle speaks the AscTec LL dialect (answers polls, acknowledges
-    commands; `serial.ll` of the configuration).
+    commands; `serial.ll` of the configuration). With `--vehicles N` or `--fleet FILE` a
+    virtual fleet: one pty per vehicle, one Tracker stream carrying every object, one
+    truth file per vehicle (`--json`: one line naming them all).
     """
     stop_after = aliased(seconds, duration, "--seconds", "--duration", None)
     cfg = load(config, {"serial.protocol": protocol})
+    if vehicles is not None or fleet is not None:  # a virtual fleet (sim_device/fleet.py)
+        from sim_device.fleet import run_fleet_command
+
+        try:
+            run_fleet_command(cfg, vehicles=vehicles, fleet_file=fleet, truth_file=truth_file,
+                              json_line=json, duration=stop_after, echo=typer.echo)
+        except ConfigError as exc:
+            raise fail(str(exc), 2) from exc
+        return
     from sim_device.realtime import run_sim_device
 
     run_sim_device(cfg, truth_file=truth_file, duration=stop_after, announce=typer.echo,

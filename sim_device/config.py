@@ -199,6 +199,12 @@ class SimConfig(ConfigModel):
     initial_yaw_deg: TurnDeg = 0.0
     pilot_thrust: Annotated[int, within(0, 4096, "stick units: the thrust stick's range")] = 0
     # scripted pilot's thrust stick when it has the vehicle (0 = motors idle on the ground)
+    pilot_rate_sticks: list[Annotated[int, within(-2048, 2047, "stick units: a rate stick's "
+                                                  "range")]] = Field(
+        default_factory=lambda: [0, 0, 0], min_length=3, max_length=3)
+    # the roll, pitch and yaw sticks the pilot holds on the channels it has (0: neutral, no
+    # rotation); a small pitch stick on a channel handed to the pilot is a vehicle that
+    # drifts (the fleet's separation tests)
     serial_enable: bool = True  # the RC serial-enable switch
     pilot_holds_thrust: bool = True
     # a pilot handed the vehicle in the air holds the thrust applied at that moment

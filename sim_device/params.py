@@ -402,13 +402,15 @@ class PilotParams:
     rc_link : the RC link is valid (STATUS flag bit 2)
     hold_thrust : when the thrust channel falls back to the pilot while airborne
         (watchdog, switch, mask-0 COMMAND), the pilot holds the thrust applied at
-        that moment, rate sticks neutral, instead of jumping to ``thrust``
+        that moment, rate sticks as held, instead of jumping to ``thrust``
+    rate_sticks : the roll, pitch and yaw sticks the pilot holds (neutral: 0)
     """
 
     thrust: int = _SIM.pilot_thrust
     serial_enable: bool = _SIM.serial_enable
     rc_link: bool = _SIM.rc_link
     hold_thrust: bool = _SIM.pilot_holds_thrust
+    rate_sticks: tuple[int, int, int] = (0, 0, 0)
 
     def __post_init__(self) -> None:
         _require(0 <= self.thrust <= 4096, "pilot.thrust", self.thrust, "in 0..4096")
@@ -463,7 +465,9 @@ class LabParams:
                                stall_at=f.stall_at_s, stall_duration=f.stall_duration_s,
                                burst_delay_s=f.burst_delay_s, data_delay=f.delay_s),
             pilot=PilotParams(thrust=sim.pilot_thrust, serial_enable=sim.serial_enable,
-                              rc_link=sim.rc_link, hold_thrust=sim.pilot_holds_thrust),
+                              rc_link=sim.rc_link, hold_thrust=sim.pilot_holds_thrust,
+                              rate_sticks=(sim.pilot_rate_sticks[0], sim.pilot_rate_sticks[1],
+                                           sim.pilot_rate_sticks[2])),
         )
 
 

@@ -1,9 +1,9 @@
 """The RC pilot of the virtual lab: a stick source the tests and the lab can script.
 
-By default the pilot holds neutral rate sticks and a fixed thrust stick
-(``sim.pilot_thrust``; 0 keeps the motors off on the floor). When the vehicle
-falls back to the pilot in the air, the pilot holds the thrust it had (neutral
-rates, holding thrust), like a safety pilot whose stick sits near hover.
+By default the pilot holds neutral rate sticks (``sim.pilot_rate_sticks``) and a fixed
+thrust stick (``sim.pilot_thrust``; 0 keeps the motors off on the floor). When the
+vehicle falls back to the pilot in the air, the pilot holds the thrust it had (its rate
+sticks as held), like a safety pilot whose stick sits near hover.
 A script ``t -> Sticks`` replaces the fixed sticks, e.g. a manual take-off.
 The pilot also owns the serial-enable switch (commands apply only while it is
 on) and the RC link flag reported in STATUS.
@@ -33,16 +33,18 @@ class Pilot:
 
     def __init__(self, params: PilotParams | None = None) -> None:
         params = params if params is not None else PilotParams()
-        self.sticks = Sticks(thrust=params.thrust)
+        roll, pitch, yaw = params.rate_sticks
+        self.sticks = Sticks(roll=roll, pitch=pitch, yaw=yaw, thrust=params.thrust)
         self.script: StickScript | None = None
         self.serial_enable = params.serial_enable
         self.rc_link = params.rc_link
         self.hold_thrust = params.hold_thrust
 
     def take_over_thrust(self, thrust: int) -> None:
-        """The thrust channel came back in flight: hold ``thrust``, rate sticks neutral."""
+        """The thrust channel came back in flight: hold ``thrust``, rate sticks as held."""
         if self.hold_thrust and self.script is None:
-            self.sticks = Sticks(thrust=thrust)
+            s = self.sticks
+            self.sticks = Sticks(roll=s.roll, pitch=s.pitch, yaw=s.yaw, thrust=thrust)
 
     def sticks_at(self, t: float) -> Sticks:
         """The pilot's sticks at simulated time ``t`` [s]."""

@@ -15,6 +15,11 @@
 * Hypothesis runs derandomized and without its wall-clock deadline: a property test
   draws the same examples on every run (a pass cannot depend on the draw), and a loaded
   machine cannot fail it.
+* A fleet's flight (several daemons, the virtual lab's vehicles and the relay: about a
+  core and a half, the daemons under the FIFO policy) never runs beside a grounded
+  virtual vehicle, whose tests time the link to the millisecond: both take one lock
+  shared by the session's workers (``fleet_alone``, module-scoped, for a module's fleet
+  flights; every ``virtual_vehicle`` test, autouse).
 * structlog's configuration is put back after every test (``fresh_logging``): a command
   run in-process configures it (level, output), and a later test on the same worker that
   captures log events would otherwise see only those at the level that command set.
@@ -22,6 +27,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import functools
 import os
 import subprocess
@@ -192,6 +199,41 @@ def no_leaks() -> Iterator[None]:
     if new_fds:
         problems.append(f"sockets/ptys still open: {sorted(new_fds)}")
     pytest.fail("resource leak: " + "; ".join(problems))
+
+
+def _cpu_lock_path(factory: pytest.TempPathFactory) -> Path:
+    """A lock file every worker of this session shares: in the session's temporary root
+    (under pytest-xdist each worker's base is a directory in it)."""
+    base = factory.getbasetemp()
+    return (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "cpu.lock"
+
+
+@contextlib.contextmanager
+def _cpu_alone(path: Path) -> Iterator[None]:
+    with path.open("a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+@pytest.fixture(scope="module")
+def fleet_alone(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Held by a module's fleet flights: no grounded virtual vehicle runs meanwhile."""
+    with _cpu_alone(_cpu_lock_path(tmp_path_factory)):
+        yield
+
+
+@pytest.fixture(autouse=True)
+def grounded_vehicles_alone(request: pytest.FixtureRequest,
+                            tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """A ``virtual_vehicle`` test waits for a fleet's flights to end (see the docstring)."""
+    if request.node.get_closest_marker("virtual_vehicle") is None:
+        yield
+        return
+    with _cpu_alone(_cpu_lock_path(tmp_path_factory)):
+        yield
 
 
 @pytest.fixture

@@ -94,7 +94,7 @@ def test_one_reply_timeout_and_a_wait_timeout_wherever_wait_is() -> None:
     assert {"goto", "hold", "land", "status", "channels"} <= set(timeouts)
     assert {p.default for p in timeouts.values()} == {REPLY_TIMEOUT_S}
     waiting = {name for name in COMMANDS if _shown(COMMANDS[name], "--wait") is not None}
-    assert waiting == {"goto", "land"}
+    assert waiting == {"goto", "land", "fleet land"}
     assert {name: p.default for name, p in _with("--wait-timeout").items()} == \
         {name: WAIT_TIMEOUT_S for name in waiting}
 

@@ -37,6 +37,7 @@ CHANGES: dict[str, Any] = {
     "initial_position": [0.5, 0.0, 0.0],
     "initial_yaw_deg": 90.0,
     "pilot_thrust": 100,
+    "pilot_rate_sticks": [0, 10, 0],
     "serial_enable": False,
     "pilot_holds_thrust": False,
     "rc_link": False,

@@ -4,7 +4,8 @@ may ask of a flying daemon, and how each is checked and answered.
 Requests are JSON objects on the request socket (:mod:`groundstation.telemetry.requests`);
 each reply is ``{"ok": true, ...}`` or ``{"ok": false, "error": why, "kind": kind}``, every
 refusal with one of the kinds of :class:`~groundstation.flight.commander.CommandRefusedError`:
-``request``, ``state``, ``volume``, ``infeasible``, ``busy``, ``internal``. Frames as
+``request``, ``state``, ``volume``, ``infeasible``, ``busy``, ``internal`` (and in a fleet
+``separation``, :class:`MotionGuard`). Frames as
 everywhere: NED earth [m], headings [rad] from north, times [s].
 
 ==============  ===========================================================  ==========
@@ -93,6 +94,19 @@ class InLoop(Protocol):
     def __call__(self, fn: Callable[[], T], /) -> T: ...
 
 Reply = dict[str, Any]
+
+
+class MotionGuard(Protocol):
+    """What checks a planned motion against what the flight loop does not see: the
+    fleet's peers (:class:`groundstation.fleet.node.FleetNode`). Both run in the
+    request's thread."""
+
+    def check(self, planned: Planned, /) -> None:
+        """Raise CommandRefusedError to refuse ``planned`` (before it is installed)."""
+
+    def installed(self, planned: Planned, /) -> None:
+        """``planned`` was installed and flies."""
+
 
 INSTALL_ATTEMPTS = 3
 """Plans of one request (each with at least twice the lead of the last, and half as much
@@ -201,6 +215,8 @@ class MotionApi:
         self._health = health
         self._clock = clock
         self._wall = wall_clock
+        self.guard: MotionGuard | None = None
+        """Set by a fleet's daemon before it serves requests (groundstation/fleet)."""
 
     def handle(self, request: Mapping[str, Any]) -> Reply:
         """The reply to one request; never raises. A refusal has its kind; a failure of
@@ -328,6 +344,8 @@ class MotionApi:
             base = self._in_loop(partial(self._base, lead))
             planned = plan_with(self._planner, spec(base), base, deadline)
             planned.motion.received = received
+            if self.guard is not None:  # a fleet: the peers' separation
+                self.guard.check(planned)
             try:
                 motion = self._in_loop(partial(self._install, planned))
             except CommandRefusedError as exc:
@@ -335,6 +353,8 @@ class MotionApi:
                     raise
                 lead = max(2.0 * lead, 1.5 * (time.monotonic() - began))
                 continue
+            if self.guard is not None:
+                self.guard.installed(planned)
             log.info("motion accepted", id=motion.id, kind=motion.kind,
                      target=[round(float(v), 3) for v in motion.target],
                      duration_s=round(motion.end - motion.start, 2))

@@ -6,6 +6,13 @@ telemetry publisher, systemd notification and the signal handlers. Each tick it
 hands the sans-IO :class:`~groundstation.flight.core.FlightCore` one DATA sample
 and the Vicon poses that arrived since the last tick.
 
+In a fleet (``fleet:``, :mod:`groundstation.fleet`) it opens its node too: each tick the
+nearest peer's distance goes to the supervisor with the input health, and after the
+tick this vehicle's state, health and pose go out on Zenoh; run-time requests arrive as
+Zenoh queries answered by the same handler as the request socket's, each motion checked
+against the peers first; with ``vicon.source: zenoh`` the Vicon poses come from the
+fleet's relay through the same pose filter.
+
 Scheduling: one tick per DATA sample (100 Hz). If no DATA arrives within 1.5
 periods of the last tick, the loop ticks anyway (without an IMU sample) so a
 stalled stream still reaches the supervisor's link-loss failsafe.
@@ -88,6 +95,7 @@ from groundstation.asctec.stats import LinkStats
 from groundstation.control.base import Controller
 from groundstation.control.trajectory import Trajectory
 from groundstation.errors import LinkError
+from groundstation.fleet.node import FleetNode
 from groundstation.flight.assembly import config_text
 from groundstation.flight.core import FlightCore, TickResult
 from groundstation.flight.inputs import DataFrontEnd, VehicleStatus, with_vicon
@@ -271,7 +279,9 @@ class FlightDaemon:
             stack.enter_context(fifo_priority(p.daemon.fifo_priority))
             link = open_link(p.link)  # the configured dialect
             stack.callback(link.close)  # sends the final COMMAND with ctrl mask 0
-            vicon = ViconReceiver.from_params(p.vicon).start()
+            fleet = self._open_fleet(stack)  # a fleet: section: peers, Zenoh (None alone)
+            vicon = (fleet.pose_source() if p.vicon.source == "zenoh" and fleet is not None
+                     else ViconReceiver.from_params(p.vicon)).start()
             stack.callback(vicon.close)
             # the configured directory, else a user's (one line says so): logdir.py
             recorder = create_flight_log(p.daemon.log_dir, config_text(p),
@@ -285,10 +295,14 @@ class FlightDaemon:
             stack.callback(server.close)
             self.control_endpoint = server.endpoint
             self._request_stats = server.stats
-            if server.endpoint is not None:  # stopped before the socket closes
+            if server.endpoint is not None or fleet is not None:  # stopped before they close
                 if self.core.commander is not None:  # motions planned in a process of its own
                     stack.enter_context(self._planner)
-                stack.enter_context(self._serving(server))
+                if server.endpoint is not None:
+                    stack.enter_context(self._serving(server))
+                if fleet is not None:  # requests as Zenoh queries, the same handler
+                    self._api.guard = fleet
+                    stack.enter_context(fleet.serving(self.handle_request))
             stack.enter_context(on_stop_signals(self._on_signal))
             stack.enter_context(cpu_latency_request(p.daemon.cpu_dma_latency_us))
             stack.enter_context(switch_interval(p.daemon.switch_interval_s))
@@ -302,10 +316,10 @@ class FlightDaemon:
                      log=self.log_dir, controller=p.controller_type)
             self._front_health = partial(self._health_section, link, vicon)
             try:
-                self._loop(_Io(link, vicon, recorder, telemetry, notifier, pacer))
+                self._loop(_Io(link, vicon, recorder, telemetry, notifier, pacer, fleet))
             finally:
                 self._inbox.close()  # requests now run where they arrive, or are refused
-            self._publish_end(telemetry, link, vicon)
+            self._publish_end(telemetry, link, vicon, fleet)
             stats = link.stats()
             self._stats.max_command_gap = stats.max_command_gap
             self._stats.keepalive_resends = stats.keepalive_resends
@@ -355,6 +369,8 @@ class FlightDaemon:
         vicon_rate, vicon_age = io.vicon.rate_and_age()
         health = with_vicon(self._front.health(start, vicon_age, vicon_rate),
                             io.vicon.evidence(), io.vicon.diagnosis)
+        if io.fleet is not None:  # the nearest peer, for the supervisor's separation rule
+            health = io.fleet.with_peers(health, start, core.last_estimate)
         result = core.tick(start, imu, poses, self._front.status, health, self.stop_requests)
         self._last = result
         clock.t_prev = start
@@ -371,6 +387,9 @@ class FlightDaemon:
         ticklog.record(start, rx.msg if rx is not None else None, imu, poses, result,
                        compute=compute, jitter=start - scheduled, latency=latency)
         io.telemetry.maybe_publish(start, partial(self._snapshot, result, link, io.vicon))
+        if io.fleet is not None:  # the fleet's telemetry and this vehicle's pose for its peers
+            io.fleet.after_tick(start, result, poses,
+                                partial(self._snapshot, result, link, io.vicon))
         self._inbox.run_pending()  # run-time requests, between ticks (app/api.py)
         if clock.wd_interval is not None and start >= clock.next_wd:
             io.notifier.watchdog()
@@ -433,6 +452,13 @@ class FlightDaemon:
             stop.set()
             thread.join(5.0)
 
+    def _open_fleet(self, stack: ExitStack) -> FleetNode | None:
+        """This vehicle's node in its fleet (``params.fleet``; groundstation/fleet), closed
+        with ``stack``; None without a fleet. FleetError if its session cannot be opened."""
+        if self.params.fleet is None:
+            return None
+        return stack.enter_context(FleetNode.open(self.params))
+
     def _health_section(self, link: VehicleLink, vicon: ViconReceiver) -> dict[str, object]:
         """Input health for a status reply: DATA and Vicon rates [Hz] and ages [s], and the
         battery [V]."""
@@ -445,10 +471,10 @@ class FlightDaemon:
                 "pilot_enabled": status.pilot_enabled}
 
     def _publish_end(self, telemetry: TelemetryPublisher, link: VehicleLink,
-                     vicon: ViconReceiver) -> None:
+                     vicon: ViconReceiver, fleet: FleetNode | None = None) -> None:
         """Publish the flight's last ``state`` (``final``, with its terminal state, outcome
         and reason) and ``health``, and give subscribers up to :data:`FINAL_LINGER_S` to
-        receive them before the publisher closes."""
+        receive them before the publisher closes; in a fleet on Zenoh too."""
         if self._last is None:
             return
         sup = self.core.supervisor
@@ -461,6 +487,8 @@ class FlightDaemon:
         t = time.monotonic()
         for topic, body in snapshot.items():
             telemetry.publish(topic, body, t)
+        if fleet is not None:
+            fleet.publish_end(snapshot, int(sup.state))
         telemetry.close(linger_s=FINAL_LINGER_S)
 
     def _snapshot(self, result: TickResult, link: VehicleLink, vicon: ViconReceiver,
@@ -534,6 +562,8 @@ class _Io:
     telemetry: TelemetryPublisher
     notifier: SdNotifier
     pacer: CollectorPacer
+    fleet: FleetNode | None = None
+    """This vehicle's node in a fleet (groundstation/fleet), None alone."""
 
 
 @dataclass

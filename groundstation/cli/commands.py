@@ -953,7 +953,8 @@ def synth_hinf(
                f"written to {out}")
 
 
-OPTIONAL_EXTRAS = {"matplotlib": "plot", "cvxpy": "hinf", "mcap": "analysis", "pandas": "analysis"}
+OPTIONAL_EXTRAS = {"matplotlib": "plot", "cvxpy": "hinf", "mcap": "analysis", "pandas": "analysis",
+                   "zenoh": "fleet"}
 """Optional packages and the extra that installs each (pyproject.toml)."""
 
 EXIT_BROKEN_PIPE = 141

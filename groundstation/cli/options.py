@@ -10,7 +10,7 @@ One option name means one thing across the whole command set:
 ``--telemetry E``   the daemon's telemetry publisher, ``telemetry.endpoint`` (monitor,
                     foxglove, ``land --wait``); formerly ``--endpoint`` on monitor and foxglove
 ``--timeout S``     how long a request waits for the daemon's reply, 3 s everywhere
-``--wait-timeout S``  how long ``--wait`` waits (goto and land), 60 s; for goto beyond the
+``--wait-timeout S``  how long ``--wait`` waits (goto, land, fleet land), 60 s; for goto beyond the
                     move's planned time
 ``--duration S``    how long the vehicle's motion lasts (``gs fly``: on the trajectory;
                     ``gs goto``: the move)

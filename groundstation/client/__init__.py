@@ -32,7 +32,17 @@ Example (``examples/fly_square.py`` flies a square)::
 Every request is one JSON message on the daemon's request socket
 (``telemetry.control_endpoint``; see :mod:`groundstation.app.api` for the wire format);
 a daemon that authenticates clients needs ``server_key`` and ``client_key`` (CURVE).
+
+A fleet's daemons (``gs fleet up``, README "Fleet") take the same requests over Zenoh:
+:class:`Fleet` opens one session to every vehicle its fleet file lists, ``fleet[name]``
+is a :class:`FleetVehicle` with every method of :class:`Client`, and a refusal for the
+fleet's separation is :class:`TooClose`.
+
+Modules: :mod:`.vehicle` (:class:`Client` and its replies and refusals), :mod:`.fleet`
+(:class:`Fleet`, :class:`FleetVehicle`; imported on first use, below).
 """
+
+from typing import TYPE_CHECKING, Any
 
 from groundstation.client.vehicle import (
     DEFAULT_CONTROL,
@@ -56,8 +66,13 @@ from groundstation.client.vehicle import (
     Preempted,
     Refused,
     Status,
+    TooClose,
     WaitTimeout,
 )
+
+if TYPE_CHECKING:  # the fleet's client, imported on first use (``__getattr__`` below)
+    from groundstation.client.fleet import Fleet as Fleet
+    from groundstation.client.fleet import FleetVehicle as FleetVehicle
 
 __all__ = [
     "DEFAULT_CONTROL",
@@ -73,6 +88,8 @@ __all__ = [
     "ClientError",
     "DaemonUnreachableError",
     "Ended",
+    "Fleet",
+    "FleetVehicle",
     "Infeasible",
     "InternalError",
     "Motion",
@@ -81,5 +98,18 @@ __all__ = [
     "Preempted",
     "Refused",
     "Status",
+    "TooClose",
     "WaitTimeout",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """``Fleet`` and ``FleetVehicle``: a fleet's vehicles over Zenoh (:mod:`.fleet`),
+    Client's methods for each vehicle and fleet-wide requests. Imported on first use: they
+    need the fleet's configuration and sessions (and the fleet extra once a Fleet opens
+    its session), which a client of one vehicle does without."""
+    if name in ("Fleet", "FleetVehicle"):
+        from groundstation.client import fleet
+
+        return getattr(fleet, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

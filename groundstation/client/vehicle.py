@@ -90,6 +90,13 @@ class Infeasible(Refused):
     kind = "infeasible"
 
 
+class TooClose(Refused):
+    """In a fleet: the motion would bring the vehicle closer to another vehicle than the
+    fleet's ``separation_m`` (where the other is, or is planned to be)."""
+
+    kind = "separation"
+
+
 class Busy(Refused):
     """The flight kept changing its plan while this motion was planned, or the daemon's
     planner was starting: try again."""
@@ -119,7 +126,7 @@ class WaitTimeout(ClientError, TimeoutError):  # noqa: N818
 
 _REFUSALS: dict[str, type[Refused]] = {
     cls.kind: cls for cls in (BadRequest, NotNow, OutsideVolume, Infeasible, Busy,
-                              InternalError)}
+                              InternalError, TooClose)}
 
 
 # --------------------------------------------------------------------------- replies
@@ -490,3 +497,4 @@ class Client:
         status = self.wait_until_arrived(motion, motion.duration_s + 10.0
                                          if timeout is None else timeout)
         return status.motion or motion
+

@@ -27,7 +27,9 @@ The configuration becomes the flight's parameter records in one place,
 Modules: :mod:`.ranges` (physical ranges), :mod:`.base` (the strict model),
 :mod:`.link` (serial, channels, vicon), :mod:`.vehicle` (vehicle, estimator),
 :mod:`.controller`, :mod:`.mission` (trajectory, safety), :mod:`.services` (telemetry,
-logging, realtime, api), :mod:`.schema` (the whole file), :mod:`.files` (reading it).
+logging, realtime, api), :mod:`.fleet` (this vehicle in a fleet), :mod:`.schema` (the
+whole file), :mod:`.files` (reading it), and :mod:`.fleetfile` (a fleet's fleet.yaml: one
+configuration for each of its vehicles).
 """
 
 from groundstation.config.base import ConfigModel, Covariance, FieldValueError
@@ -55,6 +57,13 @@ from groundstation.config.files import (
     validate_config,
     validation_problems,
 )
+from groundstation.config.fleet import (
+    FLEET_NAME,
+    RESERVED_NAMES,
+    FleetConfig,
+    FleetName,
+    ZenohConfig,
+)
 from groundstation.config.link import (
     ChannelsConfig,
     LlConfig,
@@ -78,6 +87,7 @@ from groundstation.config.ranges import (
     LabCoordinate,
     LabLength,
     TurnDeg,
+    ZenohEndpoint,
     ZmqEndpoint,
     magnitude_within,
     within,
@@ -85,18 +95,20 @@ from groundstation.config.ranges import (
 from groundstation.config.schema import GroundStationConfig
 from groundstation.config.services import ApiConfig, LoggingConfig, RealtimeConfig, TelemetryConfig
 from groundstation.config.vehicle import EstimatorConfig, VehicleConfig
-from groundstation.endpoints import zmq_endpoint
+from groundstation.endpoints import zenoh_endpoint, zenoh_local, zmq_endpoint
 from groundstation.errors import ConfigError
 from groundstation.types import Channel
 
 __all__ = [
     "COMMAND_RATE_MAX_HZ",
     "DAY_S",
+    "FLEET_NAME",
     "FLIGHT_MAX_S",
     "LAB_EXTENT_M",
     "MAX_FILE_BYTES",
     "MAX_YAML_VALUES",
     "NYQUIST_RAD_S",
+    "RESERVED_NAMES",
     "VICON_RATE_MAX_HZ",
     "ApiConfig",
     "Channel",
@@ -113,6 +125,8 @@ __all__ = [
     "FieldValueError",
     "FifoPriority",
     "FilePath",
+    "FleetConfig",
+    "FleetName",
     "GroundStationConfig",
     "HinfConfig",
     "HostAddress",
@@ -134,6 +148,8 @@ __all__ = [
     "TurnDeg",
     "VehicleConfig",
     "ViconConfig",
+    "ZenohConfig",
+    "ZenohEndpoint",
     "ZmqEndpoint",
     "apply_overrides",
     "check_files",
@@ -147,5 +163,7 @@ __all__ = [
     "validate_config",
     "validation_problems",
     "within",
+    "zenoh_endpoint",
+    "zenoh_local",
     "zmq_endpoint",
 ]

@@ -190,6 +190,11 @@ class ViconConfig(ConfigModel):
     # gap, for a new stream, and before the estimator re-anchors on poses it gated (issue
     # 14: never one pose). 3: 20 ms late at 100 Hz, 0.2 s at 10 Hz; one stray pose is not
     # enough, and a chance agreement of three is as unlikely as the gate allows
+    source: Literal["udp", "zenoh"] = "udp"
+    # where the object's datagrams come from: "udp", Tracker's stream on bind_address:port;
+    # "zenoh", the fleet's `gs vicon-relay`, which receives that stream once for every
+    # vehicle (key <fleet.name>/vicon/<object_name>; needs the fleet: section). Either
+    # way the same pose filter, latency model and failsafes (groundstation/fleet)
 
     @field_validator("object_name")
     @classmethod

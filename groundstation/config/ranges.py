@@ -17,7 +17,7 @@ from typing import Annotated
 
 from pydantic import AfterValidator, Field
 
-from groundstation.endpoints import host_address, zmq_endpoint
+from groundstation.endpoints import host_address, zenoh_endpoint, zmq_endpoint
 from groundstation.model.quadrotor import QuadrotorParams
 from groundstation.model.sensors import (
     ACC_VARIANCE_TABLE_6_3,
@@ -155,6 +155,8 @@ HostAddress = Annotated[str, AfterValidator(host_address)]
 """The address of a UDP socket (IPv4: the Vicon client and sender are AF_INET)."""
 
 ZmqEndpoint = Annotated[str, AfterValidator(zmq_endpoint)]
+ZenohEndpoint = Annotated[str, AfterValidator(zenoh_endpoint)]
+"""A fleet member's Zenoh locator, ``PROTOCOL/HOST:PORT`` (``fleet.zenoh``, fleet.yaml)."""
 
 
 

@@ -10,7 +10,9 @@ configuration. Each function below maps one section (or the few it combines) ont
 record, a line per field; :func:`assemble` calls each once and returns the frozen
 :class:`~groundstation.flight.params.FlightParams` the flight core, the real-time daemon
 and the in-process runner take. So a parameter's way from the YAML file to its use is
-one hop: its key, its line here, the record field it becomes.
+one hop: its key, its line here, the record field it becomes. A fleet's records are
+mapped here too: a vehicle's ``fleet:`` section (:func:`fleet_params`, in the bundle) and
+the relay of a fleet file (:func:`relay_params`).
 
 :func:`check_config` runs the checks the configuration layer cannot make alone (it
 knows no module that uses it): the files the configuration names, the CURVE key files,
@@ -32,6 +34,7 @@ from groundstation.config import (
     ApiConfig,
     ControllerConfig,
     ExternalForceConfig,
+    FleetConfig,
     GroundStationConfig,
     HinfConfig,
     LoggingConfig,
@@ -43,11 +46,13 @@ from groundstation.config import (
     TrajectoryConfig,
     VehicleConfig,
     ViconConfig,
+    ZenohConfig,
     dump_config,
     file_problems,
     raise_problems,
     validation_problems,
 )
+from groundstation.config.fleetfile import FleetFile
 from groundstation.control.feasibility import FlightLimits, LimitNames, Volume
 from groundstation.control.hinf import default_gain_path
 from groundstation.control.hinf_design import HinfDesign, HinfWeights
@@ -64,7 +69,13 @@ from groundstation.errors import ConfigError
 from groundstation.estimation.records import EkfParams
 from groundstation.flight.commander import DEFAULT_MOVE_ACCEL_M_S2, CommanderParams, MotionLimits
 from groundstation.flight.mission import MissionParams
-from groundstation.flight.params import DaemonParams, FlightParams
+from groundstation.flight.params import (
+    DaemonParams,
+    FleetParams,
+    FlightParams,
+    RelayParams,
+    ZenohParams,
+)
 from groundstation.flight.planner import PlannerSettings
 from groundstation.flight.supervisor import SupervisorLimits
 from groundstation.model.quadrotor import QuadrotorParams
@@ -107,6 +118,7 @@ def assemble(config: GroundStationConfig) -> FlightParams:
         telemetry=publisher_params(config.telemetry),
         requests=request_server_params(config.telemetry),
         daemon=daemon_params(config.logging, config.realtime, config.safety, config.api),
+        fleet=None if config.fleet is None else fleet_params(config.fleet),
         source=config,
     )
 
@@ -141,11 +153,12 @@ def rotation(euler_xyz_deg: list[float]) -> Matrix3:
 
 
 def vicon_params(v: ViconConfig, safety: SafetyConfig) -> ViconParams:
-    """The Vicon stream of the ``vicon`` section; the pose filter's plausible volume is the
+    """The Vicon stream of the ``vicon`` section (``vicon.source``: this daemon's socket or
+    a fleet's relay); the pose filter's plausible volume is the
     flight volume of ``safety`` grown by the margin, its rate band's top
     ``MAX_RATE_FACTOR`` times the expected rate."""
     return ViconParams(
-        bind_address=v.bind_address, port=v.port,
+        bind_address=v.bind_address, port=v.port, source=v.source,
         filter=PoseFilterParams(
             object_name=v.object_name, world_to_ned=rotation(v.world_to_ned.euler_xyz_deg),
             body_to_object=rotation(v.body_to_object.euler_xyz_deg), latency_s=v.latency_s,
@@ -335,9 +348,10 @@ def planner_settings(t: TrajectoryConfig, api: ApiConfig, limits: FlightLimits,
 # --------------------------------------------------------------------------- the supervisor
 def supervisor_limits(config: GroundStationConfig) -> SupervisorLimits:
     """The supervisor's limits and failsafes: the ``safety`` section, the DATA rate it
-    requires (80 % of ``serial.data_period_ms``'s), ``vicon.min_rate_hz`` and
-    :func:`pilot_grace_s`."""
-    s = config.safety
+    requires (80 % of ``serial.data_period_ms``'s), ``vicon.min_rate_hz``,
+    :func:`pilot_grace_s` and, in a fleet, the separation from its peers
+    (``fleet.separation_m``, ``fleet.separation_hold_s``)."""
+    s, fleet = config.safety, config.fleet
     return SupervisorLimits(
         volume_x=s.volume_x, volume_y=s.volume_y, volume_z=s.volume_z,
         max_tilt_rad=math.radians(s.max_tilt_deg),
@@ -350,6 +364,10 @@ def supervisor_limits(config: GroundStationConfig) -> SupervisorLimits:
         pilot_grace_s=pilot_grace_s(config.serial), on_geofence=s.on_geofence,
         on_overruled=s.on_overruled,
         on_second_stream=s.on_second_stream, landing_confirm_s=s.landing_confirm_s,
+        # a fleet's peers (``fleet``): closer than separation_m, hold; alone, no rule
+        separation_m=fleet.separation_m if fleet is not None else None,
+        separation_hold_s=fleet.separation_hold_s if fleet is not None
+        else SupervisorLimits().separation_hold_s,
     )
 
 
@@ -389,6 +407,43 @@ def daemon_params(log: LoggingConfig, rt: RealtimeConfig, safety: SafetyConfig,
         switch_interval_s=rt.switch_interval_ms / 1000.0, paced_gc=rt.paced_gc,
         second_signal_after_s=safety.second_signal_after_s,
         plan_timeout_s=api.plan_timeout_s, start_horizon_s=api.start_horizon_s)
+
+
+# --------------------------------------------------------------------------- a fleet
+def fleet_params(f: FleetConfig) -> FleetParams:
+    """This vehicle in its fleet (the ``fleet`` section): its node's keys, peers, rates and
+    network, and the separation its motions are checked against at planning (the
+    in-flight rule's is the supervisor's: :func:`supervisor_limits`)."""
+    return FleetParams(name=f.name, vehicle=f.vehicle, peers=tuple(f.peers),
+                       separation_m=f.separation_m, peer_timeout_s=f.peer_timeout_s,
+                       pose_rate_hz=f.pose_rate_hz, zenoh=zenoh_params(f.zenoh))
+
+
+def zenoh_params(z: ZenohConfig) -> ZenohParams:
+    """How a fleet member joins the fleet's Zenoh network (``fleet.zenoh``, or what a fleet
+    file gives the relay and its clients: :meth:`~groundstation.config.fleetfile.FleetFile.
+    zenoh_for`)."""
+    return ZenohParams(listen=tuple(z.listen), connect=tuple(z.connect),
+                       tls_root_ca=z.tls_root_ca, tls_certificate=z.tls_certificate,
+                       tls_private_key=z.tls_private_key, operators=tuple(z.operators))
+
+
+def relay_params(spec: FleetFile, base: GroundStationConfig) -> RelayParams:
+    """``gs vicon-relay`` of a fleet file with a ``relay:``: Tracker's stream where the base
+    configuration receives it (``vicon.bind_address``, ``vicon.port``), every object
+    plausible within all the vehicles' volumes together grown by
+    ``vicon.plausibility_margin_m``, and the relay's Zenoh endpoint (``relay.listen``)."""
+    if spec.relay is None:
+        raise ConfigError("relay: null: this fleet's daemons read the UDP stream "
+                          "themselves, there is no relay to run")
+    boxes = [spec.volume_of(base, v) for v in spec.vehicles]
+    union = ((min(b[0][0] for b in boxes), max(b[0][1] for b in boxes)),
+             (min(b[1][0] for b in boxes), max(b[1][1] for b in boxes)),
+             (min(b[2][0] for b in boxes), max(b[2][1] for b in boxes)))
+    return RelayParams(
+        fleet=spec.fleet, vehicles=tuple(spec.names), bind_address=base.vicon.bind_address,
+        port=base.vicon.port, plausible_volume=grown(union, base.vicon.plausibility_margin_m),
+        zenoh=zenoh_params(spec.zenoh_for("relay", [spec.relay.listen])))
 
 
 def config_text(params: FlightParams) -> str:

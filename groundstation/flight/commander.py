@@ -73,7 +73,8 @@ trajectory, a later ``start_at``. It also bounds the work of planning one (the c
 sample a motion's whole length)."""
 
 
-RefusalKind = Literal["request", "state", "volume", "infeasible", "busy", "internal"]
+RefusalKind = Literal["request", "state", "volume", "infeasible", "busy", "internal",
+                      "separation"]
 
 
 class CommandRefusedError(GroundStationError):
@@ -90,6 +91,8 @@ class CommandRefusedError(GroundStationError):
     busy : the plan changed while this one was planned, or the planner is starting (try
         again)
     internal : the ground station failed to answer (a fault of ours, logged)
+    separation : it would bring the vehicle closer to a peer of its fleet than
+        ``fleet.separation_m`` (groundstation/fleet/separation.py)
     """
 
     def __init__(self, kind: RefusalKind, reason: str) -> None:

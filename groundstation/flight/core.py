@@ -343,6 +343,7 @@ class FlightCore:
             vicon_outside=health.vicon_outside, vicon_rivals=health.vicon_rivals,
             overruled=self._overruled_now() if self.init_report is not None else "",
             reference_fault=self._reference_fault, vicon_diagnosis=health.vicon_diagnosis,
+            peer_distance_m=health.peer_distance_m, peer_name=health.peer_name,
         )
 
     def _fresh_vicon(self, health: InputHealth) -> tuple[float, float, float] | None:

@@ -51,6 +51,8 @@ class InputHealth:
         is newer than any pose passed (None if there is none)
     vicon_rivals : confirmed pose streams of the object besides the one followed, now
     vicon_diagnosis : what the pose filter saw, in one line (called only when needed)
+    peer_distance_m, peer_name : the nearest peer of a fleet, from this vehicle's estimate
+        [m], and its name (inf and "" alone, or with no peer heard: groundstation/fleet)
     """
 
     data_age_s: float
@@ -61,6 +63,8 @@ class InputHealth:
     vicon_outside: tuple[float, float, float] | None = None
     vicon_rivals: int = 0
     vicon_diagnosis: Callable[[], str] | None = None
+    peer_distance_m: float = math.inf
+    peer_name: str = ""
 
 
 def with_vicon(health: InputHealth, evidence: ViconEvidence,

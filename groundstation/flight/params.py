@@ -27,6 +27,7 @@ from groundstation.model.sensors import ImuScaling
 from groundstation.telemetry.publisher import PublisherParams
 from groundstation.telemetry.requests import RequestServerParams
 from groundstation.types import Channel
+from groundstation.vicon.plausibility import Box
 from groundstation.vicon.receiver import ViconParams
 
 if TYPE_CHECKING:
@@ -64,6 +65,66 @@ class DaemonParams:
 
 
 @dataclass(frozen=True, slots=True)
+class ZenohParams:
+    """How a process joins its fleet's Zenoh network (``fleet.zenoh``; README "Fleet").
+
+    listen : endpoints it accepts the others' links on, ``PROTOCOL/HOST:PORT``
+    connect : the others' listen endpoints (retried while absent)
+    tls_root_ca, tls_certificate, tls_private_key : PEM files of the lab's CA, this
+        process's certificate and its key: mutual TLS and the fleet's access rules (all
+        None: loopback only, no TLS)
+    operators : certificate common names, besides the vehicles, allowed to send requests
+    """
+
+    listen: tuple[str, ...]
+    connect: tuple[str, ...]
+    tls_root_ca: Path | None
+    tls_certificate: Path | None
+    tls_private_key: Path | None
+    operators: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class FleetParams:
+    """This vehicle in a fleet (``fleet``; :mod:`groundstation.fleet`).
+
+    name : the fleet's key prefix; vehicle : this vehicle's name; peers : the others'
+    separation_m : least distance to a peer kept at planning [m] (None: off; the
+        supervisor's in-flight rule is in :class:`SupervisorLimits`)
+    peer_timeout_s : a peer whose pose is older than this is silent [s]
+    pose_rate_hz : this vehicle's estimated pose published for its peers [Hz]
+    zenoh : how it joins the fleet's network
+    """
+
+    name: str
+    vehicle: str
+    peers: tuple[str, ...]
+    separation_m: float | None
+    peer_timeout_s: float
+    pose_rate_hz: float
+    zenoh: ZenohParams
+
+
+@dataclass(frozen=True, slots=True)
+class RelayParams:
+    """``gs vicon-relay`` of a fleet file (:mod:`groundstation.fleet.relay`).
+
+    fleet : the key prefix; vehicles : the fleet's vehicles (its members by name)
+    bind_address, port : where Tracker's UDP stream arrives (the base's ``vicon``)
+    plausible_volume : where an object can be, NED [m]: every vehicle's volume together,
+        grown by ``vicon.plausibility_margin_m``
+    zenoh : how the relay joins the fleet's network
+    """
+
+    fleet: str
+    vehicles: tuple[str, ...]
+    bind_address: str
+    port: int
+    plausible_volume: Box
+    zenoh: ZenohParams
+
+
+@dataclass(frozen=True, slots=True)
 class FlightParams:
     """Everything a flight is configured to be, in the packages' own records.
 
@@ -89,6 +150,7 @@ class FlightParams:
     telemetry : the publisher (``telemetry``); requests : the request socket
         (``telemetry.control_*``)
     daemon : what the real-time daemon does beside the flight
+    fleet : this vehicle in a fleet (``fleet``), None alone
     source : the validated configuration it was assembled from, for the two that need
         the file itself: the flight log's copy of it and a virtual lab (a plugin that
         reads its own ``sim:`` section). The flight never reads it.
@@ -116,6 +178,7 @@ class FlightParams:
     telemetry: PublisherParams
     requests: RequestServerParams
     daemon: DaemonParams
+    fleet: FleetParams | None
     source: GroundStationConfig
 
     @property

@@ -21,6 +21,10 @@ States and transitions::
                                                   default) or LAND; while landing, the
                                                   landing goes on re-anchored
       the reference asks more than the feasibility check allowed -> LAND
+      a fleet's peer closer than separation_m / 2 -> LAND; closer than separation_m
+                                               -> HOLD (TAKEOFF, TRACK)
+      HOLD for a peer and the gap open again (1.1 x separation_m) -> the state interrupted
+      HOLD for a peer longer than separation_hold_s -> LAND
       Vicon silent > vicon_loss_hold_s         -> HOLD (hold position on the IMU estimate)
       HOLD and Vicon back                      -> the state HOLD interrupted
       HOLD and Vicon silent > vicon_loss_land_s -> LAND
@@ -148,6 +152,11 @@ class SupervisorLimits:
     landing_confirm_s: float = 5.0
     """A landing whose estimate sits at the floor without evidence for this long (after
     ``landed_time_s``) hands back [s]."""
+    separation_m: float | None = None
+    """A fleet's least distance to a peer [m] (``fleet.separation_m``; None: alone or off):
+    closer, hold; closer than half of it, land."""
+    separation_hold_s: float = 3.0
+    """A hold for a peer that lasts this long without the gap opening lands [s]."""
     contact_height_m: float = 0.5
     """Floor contact counts only below this estimated height [m] (what dead reckoning may
     drift during a landing without Vicon), and with Vicon fused only below
@@ -194,6 +203,8 @@ class Observation:
         tick ("" if it was not): the estimate was wrong
     reference_fault : why the reference is beyond what the feasibility check allowed ("")
     vicon_diagnosis : what the pose filter saw, for a preflight failure (called only then)
+    peer_distance_m, peer_name : a fleet's nearest peer: its distance from the estimate [m]
+        and its name (inf: none)
     """
 
     t: float
@@ -222,6 +233,8 @@ class Observation:
     overruled: str = ""
     reference_fault: str = ""
     vicon_diagnosis: Callable[[], str] | None = None
+    peer_distance_m: float = math.inf
+    peer_name: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -271,6 +284,7 @@ class Supervisor:
     _landed_since: float | None = None
     _unconfirmed_since: float | None = None
     _hold_for_rival = False
+    _hold_for_peer = False
     _not_applying_since: float | None = None
     _applied: bool = False
     _battery_low_since: float | None = None
@@ -433,7 +447,11 @@ class Supervisor:
                 return State.LAND, what
             if self.state is not State.HOLD:
                 self._held, self._hold_for_rival = self.state, True
+                self._hold_for_peer = False
                 return State.HOLD, f"{what}: holding"
+        peer = self._separation(obs)
+        if peer is not None:
+            return peer
         if obs.tilt_rad > lim.max_tilt_rad:
             return State.LAND, f"tilt {math.degrees(obs.tilt_rad):.0f} deg over the limit"
         low = self._battery_low_since
@@ -444,7 +462,23 @@ class Supervisor:
             return State.LAND, f"Vicon lost for {obs.vicon_age_s:.2f} s"
         if obs.vicon_age_s > lim.vicon_loss_hold_s and self.state in (State.TAKEOFF, State.TRACK):
             self._held, self._hold_for_rival = self.state, False
+            self._hold_for_peer = False
             return State.HOLD, f"Vicon lost for {obs.vicon_age_s:.2f} s: holding on IMU"
+        return None
+
+    def _separation(self, obs: Observation) -> tuple[State, str] | None:
+        """A fleet's peer too close (groundstation/fleet): closer than half the separation,
+        land; closer than it, hold (from TAKEOFF or TRACK). None otherwise."""
+        sep = self.limits.separation_m
+        if sep is None or not obs.peer_distance_m < sep:
+            return None
+        what = f"{obs.peer_name} {obs.peer_distance_m:.2f} m away"
+        if obs.peer_distance_m < 0.5 * sep:
+            return State.LAND, (f"too close to a peer: {what}, less than half the "
+                                f"separation ({sep:.2f} m)")
+        if self.state in (State.TAKEOFF, State.TRACK):
+            self._held, self._hold_for_rival, self._hold_for_peer = self.state, False, True
+            return State.HOLD, f"too close to a peer: {what} (separation {sep:.2f} m): holding"
         return None
 
     def _geofence(self, obs: Observation) -> str | None:
@@ -530,6 +564,17 @@ class Supervisor:
         if failsafe is not None:
             return self._go(obs.t, *failsafe, failsafe=True)
         lim = self.limits
+        if self._hold_for_peer:
+            sep = lim.separation_m if lim.separation_m is not None else 0.0
+            fixed = obs.vicon_age_s <= lim.vicon_loss_hold_s
+            if obs.peer_distance_m >= PEER_RESUME * sep and fixed:
+                self._hold_for_peer = False
+                return self._go(obs.t, self._held, "the gap to the peers is open again")
+            if obs.t - self._t_state > lim.separation_hold_s:
+                return self._go(obs.t, State.LAND, f"held beside a peer for "
+                                f"{obs.t - self._t_state:.1f} s ({obs.peer_name} "
+                                f"{obs.peer_distance_m:.2f} m away)", failsafe=True)
+            return self.state
         if self._hold_for_rival:
             if obs.vicon_rivals == 0 and obs.vicon_age_s <= lim.vicon_loss_hold_s:
                 return self._go(obs.t, self._held, "the second Vicon stream stopped")
@@ -584,6 +629,9 @@ class Supervisor:
                             nominal=True)
         return self.state
 
+
+PEER_RESUME = 1.1
+"""A hold for a peer ends once the gap is this many separations again (hysteresis)."""
 
 GEOFENCE = "left the volume"
 """How every geofence reason starts (the supervisor logs those as errors)."""

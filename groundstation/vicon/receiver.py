@@ -24,7 +24,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from types import TracebackType
-from typing import Unpack
+from typing import Literal, Unpack
 
 import numpy.typing as npt
 import structlog
@@ -45,11 +45,14 @@ MAX_DATAGRAM = 65536
 @dataclass(frozen=True, slots=True)
 class ViconParams:
     """The Vicon stream: the UDP ``bind_address`` and ``port`` it arrives on, and the
-    pose ``filter`` every datagram goes through."""
+    pose ``filter`` every datagram goes through; ``source`` says who receives it:
+    ``udp``, this receiver; ``zenoh``, a fleet's relay, whose items go through the same
+    filter (:mod:`groundstation.fleet.posesource`)."""
 
     bind_address: str
     port: int
     filter: PoseFilterParams
+    source: Literal["udp", "zenoh"]
 
 
 class ViconReceiver:
