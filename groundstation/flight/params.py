@@ -5,6 +5,11 @@ configuration, once; the flight core, the real-time daemon and the in-process ru
 take it, and nothing they call sees the configuration. A parameter's way from the YAML
 file to its use is one hop: the key, its line in the assembly, the record field below
 it becomes (each field names the section it comes from).
+
+The records of the packages that stand above the flight are declared here, where the
+assembly can build them without importing upwards: the daemon's :class:`DaemonParams`
+and a fleet's :class:`FleetParams` (in the bundle), :class:`ZenohParams` and the Vicon
+relay's :class:`RelayParams` (:mod:`groundstation.fleet`).
 """
 
 from __future__ import annotations
