@@ -11,10 +11,12 @@ import time
 import tty
 from collections.abc import Callable, Iterator
 
+import numpy as np
 import pytest
 
 from groundstation.asctec.blocks import AxisCounts, StatusBlock
 from groundstation.asctec.decoder import RejectedFrame, StreamDecoder, encode_frame
+from groundstation.asctec.keepalive import WATCHDOG_S
 from groundstation.asctec.link import ReceivedData, SerialLink
 from groundstation.asctec.messages import CommandMsg, ConfigMsg, DataMsg, Message
 from groundstation.errors import LinkError
@@ -192,10 +194,13 @@ def test_keepalive_keeps_commands_flowing_when_the_caller_is_silent(vehicle: Veh
     assert stats.keepalive_resends >= 14
     assert len(times) == stats.commands_sent >= 15
     gaps = [b - a for a, b in itertools.pairwise(times)]
-    # Timing tolerance: the sender thread wakes at each deadline; 30 ms of scheduling
-    # slack on a loaded machine still keeps every gap under the 100 ms watchdog.
-    assert max(gaps) < 1 / rate + 0.03
-    assert stats.max_command_gap < 1 / rate + 0.03
+    # The sender wakes at each deadline, so its typical gap is the period; what the
+    # vehicle needs is that no gap reaches its watchdog. This test runs beside other
+    # work, which can delay one wake-up by tens of milliseconds (55 ms seen once), so
+    # the bound on the largest gap is the watchdog's, not the period plus a guess.
+    assert float(np.median(gaps)) == pytest.approx(1 / rate, abs=0.005)
+    assert max(gaps) < WATCHDOG_S
+    assert 1 / rate - 0.005 < stats.max_command_gap <= max(gaps)  # counted once armed
 
 
 def test_keepalive_hands_back_after_stale_after(vehicle: Vehicle) -> None:
