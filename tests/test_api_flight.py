@@ -28,7 +28,6 @@ import json
 import os
 import select
 import signal
-import socket
 import subprocess
 import sys
 import textwrap
@@ -51,6 +50,7 @@ from groundstation.client import (
     OutsideVolume,
 )
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.fleetops.virtual import free_ports
 from sim_device.realtime import SimDeviceProcess
 
 REPO = Path(__file__).resolve().parents[1]
@@ -68,19 +68,6 @@ CORNERS = np.array([[0.375, 0.375, -1.0], [0.375, -0.375, -1.0],
 TRANSITIONS = [("PREFLIGHT", "TAKEOFF"), ("TAKEOFF", "TRACK"), ("TRACK", "LAND"),
                ("LAND", "DISARM"), ("DISARM", "DONE")]
 """The supervisor's transitions of a nominal commanded flight, in order."""
-
-
-def free_tcp_ports(count: int) -> list[int]:
-    """``count`` different TCP ports nothing on loopback listens on now (the daemon, another
-    process, binds them a moment later: ``*`` ports could not be read back from here)."""
-    sockets = [socket.socket(socket.AF_INET, socket.SOCK_STREAM) for _ in range(count)]
-    try:
-        for s in sockets:  # all held at once: no port is handed out twice
-            s.bind(("127.0.0.1", 0))
-        return [int(s.getsockname()[1]) for s in sockets]
-    finally:
-        for s in sockets:
-            s.close()
 
 
 def _gs(*args: str, timeout: float = 30.0) -> subprocess.CompletedProcess[str]:
@@ -165,7 +152,7 @@ class Flight:
 
     def __init__(self, tmp: Path, stack: contextlib.ExitStack) -> None:
         self.tmp = tmp
-        self.control, self.telemetry = (f"tcp://127.0.0.1:{p}" for p in free_tcp_ports(2))
+        self.control, self.telemetry = (f"tcp://127.0.0.1:{p}" for p in free_ports(2))
         self.truth_file = tmp / "truth.npz"
         self.cfg: GroundStationConfig = apply_overrides(
             load_config(REPO / "config" / "sim.yaml"), {

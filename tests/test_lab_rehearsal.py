@@ -23,7 +23,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -36,6 +35,7 @@ from lab_helpers import free_udp_port, sim_config
 from scipy.optimize import brentq
 
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.fleetops.virtual import free_ports
 from sim_device.realtime import SimDeviceProcess
 
 REPO = Path(__file__).resolve().parents[1]
@@ -43,18 +43,6 @@ GS = Path(sys.executable).parent / "gs"
 TRUE_OVER_MODEL = [1.3, 0.7, 1.3]  # the virtual vehicle's rate gains / the configured ones
 TRUE_LIFT = 0.9  # its rotors' lift / eq. 3.7
 UNWRITABLE = "/sys/groundstation-rehearsal/flightlogs"  # sysfs: nobody, root neither
-
-
-def free_tcp_ports(count: int) -> list[int]:
-    """``count`` different TCP ports nothing on loopback listens on now."""
-    sockets = [socket.socket(socket.AF_INET, socket.SOCK_STREAM) for _ in range(count)]
-    try:
-        for s in sockets:
-            s.bind(("127.0.0.1", 0))
-        return [int(s.getsockname()[1]) for s in sockets]
-    finally:
-        for s in sockets:
-            s.close()
 
 
 class Day:
@@ -65,7 +53,7 @@ class Day:
         self.pty = pty
         self.env = {k: v for k, v in os.environ.items() if k != "NOTIFY_SOCKET"}
         self.env["XDG_STATE_HOME"] = str(tmp / "state")
-        telemetry, control = free_tcp_ports(2)
+        telemetry, control = free_ports(2)
         # the guide: "copy config/lab.yaml"; here the virtual lab is where the lab is
         self.config = apply_overrides(load_config(REPO / "config" / "lab.yaml"), {
             "vicon.port": vicon_port, "vicon.bind_address": "127.0.0.1",
