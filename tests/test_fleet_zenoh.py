@@ -8,6 +8,7 @@ from __future__ import annotations
 import shutil
 import socket
 import subprocess
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -202,6 +203,13 @@ def _planned(params: FlightParams, target: list[float]) -> Any:
                       params.planner.limits)
 
 
+def _repeat(action: Callable[[], object], period_s: float, done: threading.Event) -> None:
+    """``action`` every ``period_s`` until ``done``."""
+    while not done.is_set():
+        action()
+        done.wait(period_s)
+
+
 @pytest.mark.slow
 def test_the_guard_refuses_what_comes_near_a_peer_and_shares_what_it_flies(tmp_path: Path
                                                                            ) -> None:
@@ -213,16 +221,26 @@ def test_the_guard_refuses_what_comes_near_a_peer_and_shares_what_it_flies(tmp_p
         assert "v2 (never heard)" in str(silent.value)
         pose = PeerPose(2, 1, (0.5, 0.0, -1.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         assert heard(n2._session, keys.vehicle_key("demo", "v2", "pose"))
-        n2._put("pose", pose.pack())
-        assert until(lambda: n1.peers.views()[0].position is not None)
-        with pytest.raises(CommandRefusedError) as close:
-            n1.check(_planned(configs["v1"], [0.2, 0.0, -1.0]))  # 0.3 m from v2
-        assert close.value.kind == "separation"
-        clear = _planned(configs["v1"], [-0.5, -0.6, -1.0])
-        n1.check(clear)
-        assert heard(n1._session, keys.vehicle_key("demo", "v1", "intent"))
-        n1.installed(clear)  # flies: v2 hears where v1 will be
-        assert until(lambda: len(n2.peers.views()[0].intent) > 10)
+        # v2 keeps saying where it is, as a flying daemon does at its telemetry rate: one
+        # pose put once goes silent after fleet.peer_timeout_s (0.5 s), which a loaded
+        # machine can spend planning the next motion
+        done = threading.Event()
+        speaker = threading.Thread(target=_repeat, args=(lambda: n2._put("pose", pose.pack()),
+                                                         0.05, done), daemon=True)
+        speaker.start()
+        try:
+            assert until(lambda: n1.peers.views()[0].position is not None)
+            with pytest.raises(CommandRefusedError) as close:
+                n1.check(_planned(configs["v1"], [0.2, 0.0, -1.0]))  # 0.3 m from v2
+            assert close.value.kind == "separation"
+            clear = _planned(configs["v1"], [-0.5, -0.6, -1.0])
+            n1.check(clear)
+            assert heard(n1._session, keys.vehicle_key("demo", "v1", "intent"))
+            n1.installed(clear)  # flies: v2 hears where v1 will be
+            assert until(lambda: len(n2.peers.views()[0].intent) > 10)
+        finally:
+            done.set()
+            speaker.join()
         intent = n2.peers.views()[0].intent
         assert np.min(np.linalg.norm(intent - [-0.5, -0.6, -1.0], axis=1)) < 0.01
         assert np.min(np.linalg.norm(intent - [-0.5, 0.0, -1.0], axis=1)) < 0.01

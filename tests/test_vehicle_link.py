@@ -365,8 +365,48 @@ def test_ll_acknowledgements_are_timed_and_missing_ones_counted(latency: float) 
     # stamped when it returned); a command matched to the wrong acknowledgement would be
     # off by the 20 ms command period
     assert all(latency - 0.008 <= t < latency + 0.015 for t in stats.ack_times), stats.ack_times
-    # a missing acknowledgement costs the IMU polls no sample (100 Hz asked for)
-    assert stats.frames["imu_rawdata"] / elapsed > 90
+    # a missing acknowledgement costs the IMU polls no sample: every poll is answered, and
+    # the link keeps polling. Its rate here is the machine's as much as the link's (a
+    # busy loop beside the real-time flights took it to 84 Hz), so the bound only catches
+    # a link stalled by lost acknowledgements (their 80 ms timeout, every 40 ms); that no
+    # grid slot is lost to them is proven on made-up times below
+    assert stats.polls_unanswered == 0
+    assert stats.frames["imu_rawdata"] >= stats.polls_sent - 1  # the last may be in flight
+    assert stats.frames["imu_rawdata"] / elapsed > 50
+
+
+@pytest.mark.parametrize("round_trip", [0.002, 0.025])
+def test_lost_acknowledgements_cost_the_poll_grid_no_slot(round_trip: float) -> None:
+    """The schedule alone, stepped every 0.1 ms for 1 s: a command every 20 ms whose every
+    second acknowledgement is lost, answers and acknowledgements after ``round_trip``. Every
+    10 ms slot is polled (100 polls), none more than half a period late, none unanswered."""
+    s = PollSchedule(0.01)
+    s.start(0.0)
+    answers: list[tuple[float, int]] = []
+    acks: list[float] = []
+    polled: list[float] = []
+    for step in range(10_000):
+        t = step * 1e-4
+        while answers and answers[0][0] <= t:
+            s.answered(answers.pop(0)[1], t)
+        while acks and acks[0] <= t:
+            s.acked(acks.pop(0))
+        if step % 200 == 0:  # a command every 20 ms
+            s.command_sent(t)
+            if step % 400 == 0:  # every second one is acknowledged
+                acks.append(t + round_trip)
+        mask = s.poll_due(t)
+        if mask is not None:
+            polled.append(t)
+            answers.extend((t + round_trip, d) for bit, d in (
+                (PollMask.IMU_RAWDATA, ImuRawData.DESCRIPTOR),
+                (PollMask.LL_STATUS, LlStatus.DESCRIPTOR),
+                (PollMask.RC_DATA, RcData.DESCRIPTOR)) if mask & bit)
+            answers.sort()
+    assert len(polled) == 100
+    late = [t - 0.01 * round(t / 0.01) for t in polled]
+    assert max(late) <= 0.005 + 1e-9
+    assert s.acks_missing >= 24 and s.polls_unanswered == 0
 
 
 @pytest.mark.parametrize("latency", [0.0, 0.025])
