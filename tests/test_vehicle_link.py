@@ -371,7 +371,6 @@ def test_ll_acknowledgements_are_timed_and_missing_ones_counted(latency: float) 
     # a link stalled by lost acknowledgements (their 80 ms timeout, every 40 ms); that no
     # grid slot is lost to them is proven on made-up times below
     assert stats.polls_unanswered == 0
-    assert stats.frames["imu_rawdata"] >= stats.polls_sent - 1  # the last may be in flight
     assert stats.frames["imu_rawdata"] / elapsed > 50
 
 
