@@ -585,6 +585,22 @@ def _is_flight_log(path: Path) -> bool:
     return path.is_dir() or path.name == "flight.npy"
 
 
+def _fit_from_log(source: Path, fit: str, name: str, out: Path, as_json: bool) -> bool:
+    """If ``source`` is a flight log, fit it with ``groundstation.identification.lift``'s
+    function ``fit``, report it and return True; else check it is a CSV file, return False."""
+    if not _is_flight_log(source):
+        _input_file(source, "measurement CSV")
+        return False
+    from groundstation.identification import lift
+
+    try:
+        result = getattr(lift, fit)(source)
+    except GroundStationError as exc:
+        raise _fail(str(exc), 2) from exc
+    _report_fit(result, name, out, as_json)
+    return True
+
+
 @identify_app.command("thrust")
 def identify_thrust(
     source: Annotated[Path, typer.Argument(
@@ -606,16 +622,7 @@ def identify_thrust(
     the configured polynomial (a flight covers the sticks near hover only).
     """
     out = aliased(out_dir, out, "--out-dir", "--out", Path("."))
-    if not _is_flight_log(source):
-        _input_file(source, "measurement CSV")
-    if _is_flight_log(source):
-        from groundstation.identification.lift import identify_thrust_log
-
-        try:
-            result = identify_thrust_log(source)
-        except GroundStationError as exc:
-            raise _fail(str(exc), 2) from exc
-        _report_fit(result, "identify-thrust", out, as_json)
+    if _fit_from_log(source, "identify_thrust_log", "identify-thrust", out, as_json):
         return
     from groundstation.model.identify import identify_thrust_csv
 
@@ -672,16 +679,7 @@ def identify_inflow(
     flight log with steady climbs and descents (a waypoint path with vertical legs).
     """
     out = aliased(out_dir, out, "--out-dir", "--out", Path("."))
-    if not _is_flight_log(source):
-        _input_file(source, "measurement CSV")
-    if _is_flight_log(source):
-        from groundstation.identification.lift import identify_inflow_log
-
-        try:
-            result = identify_inflow_log(source)
-        except GroundStationError as exc:
-            raise _fail(str(exc), 2) from exc
-        _report_fit(result, "identify-inflow", out, as_json)
+    if _fit_from_log(source, "identify_inflow_log", "identify-inflow", out, as_json):
         return
     from groundstation.model.identify import identify_inflow_csv
 
