@@ -16,12 +16,14 @@ import contextlib
 import itertools
 import os
 import select
+import statistics
 import threading
 import time
 import tty
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
+import numpy as np
 import pytest
 
 from groundstation.asctec.blocks import AxisCounts, RcBlock, StatusBlock
@@ -359,12 +361,17 @@ def test_ll_acknowledgements_are_timed_and_missing_ones_counted(latency: float) 
             elapsed = time.monotonic() - t0 - latency
     finally:
         vehicle.close()
+    # every command settled once: acknowledged or counted missing; each of the ten
+    # acknowledgements sent is counted, matched or (its command already given up) late
     assert stats.acks + stats.acks_missing == 20
-    assert stats.acks == 10 and stats.acks_missing == 10
-    # the responder's latency, give or take a loaded machine's scheduling (the write is
-    # stamped when it returned); a command matched to the wrong acknowledgement would be
-    # off by the 20 ms command period
-    assert all(latency - 0.008 <= t < latency + 0.015 for t in stats.ack_times), stats.ack_times
+    assert stats.acks + stats.acks_unexpected == 10 and stats.acks_missing >= 10
+    # never matched to a later command (that would be 20 ms short of the responder's
+    # latency; the reader's scheduling only ever adds). Matched to the right command the
+    # typical time is the latency: the median, because on a loaded machine a reader
+    # stalled past the 10 ms margin may match one acknowledgement to the lost command
+    # before it, as documented; the exact matching is proven on made-up times below
+    assert min(stats.ack_times) >= latency - 0.008, stats.ack_times
+    assert statistics.median(stats.ack_times) < latency + 0.015, stats.ack_times
     # a missing acknowledgement costs the IMU polls no sample: every poll is answered, and
     # the link keeps polling. Its rate here is the machine's as much as the link's (a
     # busy loop beside the real-time flights took it to 84 Hz), so the bound only catches
@@ -372,6 +379,50 @@ def test_ll_acknowledgements_are_timed_and_missing_ones_counted(latency: float) 
     # grid slot is lost to them is proven on made-up times below
     assert stats.polls_unanswered == 0
     assert stats.frames["imu_rawdata"] / elapsed > 50
+
+
+@pytest.mark.parametrize("round_trip", [0.002, 0.025])
+def test_each_acknowledgement_is_timed_against_its_own_command(round_trip: float) -> None:
+    """Made-up times, 1 s: a command every 20 ms, every second acknowledgement lost, polls on
+    the 10 ms grid; answers and acknowledgements come ``round_trip`` later plus a reader's
+    delay of 0-7 ms that varies from packet to packet. Each acknowledgement that comes is
+    timed against the command it answers (a match to its neighbour would be 20 ms off),
+    and each lost one is counted once."""
+    s = PollSchedule(0.01)
+    s.start(0.0)
+    events: list[tuple[float, str, int]] = []  # (arrival, kind, descriptor)
+    true_ages: list[float] = []  # of the acknowledgements, in the order sent
+    n = 0
+    for step in range(10_000):
+        t = step * 1e-4
+        while events and events[0][0] <= t:
+            _, kind, descriptor = events.pop(0)
+            if kind == "ack":
+                s.acked(t)
+            else:
+                s.answered(descriptor, t)
+        if step % 200 == 0:
+            s.command_sent(t)
+            if step % 400 == 0:
+                delay = round_trip + 1e-3 * (n * 5 % 8)
+                events.append((t + delay, "ack", 0))
+                true_ages.append(delay)
+            n += 1
+        mask = s.poll_due(t)
+        if mask is not None:
+            for bit, d in ((PollMask.IMU_RAWDATA, ImuRawData.DESCRIPTOR),
+                           (PollMask.LL_STATUS, LlStatus.DESCRIPTOR),
+                           (PollMask.RC_DATA, RcData.DESCRIPTOR)):
+                if mask & bit:
+                    delay = round_trip + 1e-3 * (n * 3 % 8)
+                    events.append((t + delay, "answer", d))
+                    n += 1
+        events.sort()
+    for t in np.arange(1.0, 1.2, 1e-4):  # let the last lost one expire
+        s.poll_due(float(t))
+    assert s.acks == 25 and s.acks_missing == 25 and s.acks_unexpected == 0
+    # stepped every 0.1 ms: an arrival is seen up to one step late
+    assert np.allclose(s.ack_times, true_ages, atol=1.01e-4), (s.ack_times, true_ages)
 
 
 @pytest.mark.parametrize("round_trip", [0.002, 0.025])

@@ -349,7 +349,8 @@ class LlLink(PortLink):
                 keepalive_resends=c.resends, keepalive_releases=c.releases,
                 max_command_gap=c.max_gap, command_gap_warnings=c.gap_warnings,
                 polls_sent=p.polls_sent, polls_unanswered=p.polls_unanswered, acks=p.acks,
-                acks_missing=p.acks_missing, ack_times=tuple(p.ack_times))
+                acks_missing=p.acks_missing, acks_unexpected=p.acks_unexpected,
+                ack_times=tuple(p.ack_times))
 
     def close(self) -> None:
         """Stop polling and the keep-alive, send a final mask-0 command if this link flew

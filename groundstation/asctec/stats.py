@@ -82,6 +82,8 @@ class LinkStats:
     acks, acks_missing : LL dialect: commands acknowledged, and not acknowledged within
         ``serial.ll.ack_timeout_ms`` (corrupt acknowledgements are the ``bad_ack``
         rejections)
+    acks_unexpected : LL dialect: acknowledgements that came when no command was owed one
+        (its command had already counted as missing: a late acknowledgement)
     ack_times : LL dialect: recent command-to-acknowledgement times [s], oldest first
     """
 
@@ -105,4 +107,5 @@ class LinkStats:
     polls_unanswered: int = 0
     acks: int = 0
     acks_missing: int = 0
+    acks_unexpected: int = 0
     ack_times: tuple[float, ...] = ()
