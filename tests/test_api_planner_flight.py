@@ -27,6 +27,7 @@ import pytest
 from lab_helpers import free_udp_port
 
 from groundstation.app.daemon import FlightDaemon, FlightSummary
+from groundstation.asctec.keepalive import WATCHDOG_S
 from groundstation.client import Client, Infeasible
 from groundstation.config import apply_overrides, dump_config, load_config
 from groundstation.flight.assembly import assemble
@@ -40,9 +41,10 @@ pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 FIGURE8 = {"name": "figure-eight", "period_s": 3000, "center": [0, 0, -1], "size_m": 0.2}
 """The hostile tester's trajectory, as they sent it."""
 
-MAX_GAP_S = 0.05
-"""Longest COMMAND gap accepted [s]: 2.5 command periods (20 ms), half the vehicle's 100 ms
-watchdog."""
+MAX_GAP_S = WATCHDOG_S
+"""Longest COMMAND gap accepted [s]: the vehicle's watchdog (100 ms). A plan made in the
+daemon's loop held it for the whole plan (seconds); a loaded machine's scheduler, tens of
+milliseconds at most, which the median's rhythm below tells apart."""
 
 
 class CollectorWatch:
@@ -143,7 +145,8 @@ def test_a_long_plan_is_made_off_the_loop_and_the_commands_keep_their_rhythm(
     assert 2 not in during, during
     # the vehicle saw the COMMANDs keep their rhythm, during the plan and after it, to the
     # landing; its watchdog never expired; the flight ended as asked
-    assert len(gaps) > 100 and gaps.max() <= MAX_GAP_S, np.sort(gaps)[-5:]
+    assert len(gaps) > 100 and gaps.max() < MAX_GAP_S, np.sort(gaps)[-5:]
+    assert np.median(gaps) == pytest.approx(0.020, abs=0.003)
     assert summary.events == [], summary.events
     assert final is not None and final.outcome == "COMPLETED"
     assert summary.outcome is Outcome.COMPLETED and summary.final_state is State.DONE

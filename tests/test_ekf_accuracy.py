@@ -119,3 +119,11 @@ def test_initial_biases_from_stationary_samples() -> None:
     # mean of 300 samples: standard error sqrt(8.54e-4/300) = 1.7e-3 rad/s on z
     np.testing.assert_allclose(report.gyro_bias, BIASED.gyro_bias, atol=6e-3)
     np.testing.assert_allclose(report.acc_bias, BIASED.acc_bias, atol=0.03)
+
+
+@pytest.mark.parametrize("probability", [0.99, 0.9999, 1 - 1e-9])
+def test_the_gate_is_the_chi_square_quantile_of_six_degrees(probability: float) -> None:
+    """A Vicon pose (6 residuals) is refused beyond the chi-square quantile of the gate's
+    probability: scipy.stats' figure, however the filter computes it."""
+    ekf = Ekf(EkfParams(gate_probability=probability))
+    assert ekf._gate == pytest.approx(chi2.ppf(probability, 6), rel=1e-12)

@@ -502,7 +502,11 @@ def test_ll_polls_hold_the_grid_and_slow_status_rc(latency: float) -> None:
     assert all(m & PollMask.IMU_RAWDATA for m in masks)
     assert [i for i, m in enumerate(masks) if m & PollMask.RC_DATA][:3] == [0, 5, 15]
     assert stats.polls_unanswered == 0
-    assert rate > 85
+    # the rate over 0.6 s is the machine's as much as the link's: one 100 ms stall of a
+    # loaded machine takes it to 84 Hz. The median gap above holds the 10 ms rhythm, the
+    # slots that no slot was polled twice; this catches a link that waits for its turn
+    # every time (half a period late: 67 Hz) or stalls
+    assert rate > 70
 
 
 def test_ll_repeated_values_are_a_repeated_sample() -> None:

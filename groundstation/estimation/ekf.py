@@ -110,10 +110,12 @@ class Ekf:
         self._qbias = np.array([p.gyro_bias_walk] * 3 + [p.acc_bias_walk] * 3)
         self._r = p.measurement_variance()  # R is diagonal (6,)
         self._R = np.diag(self._r)
-        from scipy.stats import chi2  # here: scipy.stats takes seconds to import, and the
-        # CLI's commands that never build a filter (gs status, gs goto) should not wait
+        # the chi-square quantile of 6 degrees of freedom, as scipy.stats.chi2.ppf gives it,
+        # from scipy.special: scipy.stats takes a second or more to import, paid by every
+        # daemon, and the CLI's commands that never build a filter should not wait at all
+        from scipy.special import chdtri
 
-        self._gate = float(chi2.ppf(p.gate_probability, 6))
+        self._gate = float(chdtri(6, 1.0 - p.gate_probability))
         self._r_reset = self._r + np.r_[[p.reset_position_sigma**2] * 3,
                                         [p.reset_attitude_sigma**2] * 3]
         self._volume = p.plausible_volume
