@@ -23,6 +23,9 @@
 * structlog's configuration is put back after every test (``fresh_logging``): a command
   run in-process configures it (level, output), and a later test on the same worker that
   captures log events would otherwise see only those at the level that command set.
+* The in-process evaluation flights are flown once per session, whichever worker asks
+  first, and read by the others from a directory the controller names and removes
+  (``eval_flights``).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import contextlib
 import fcntl
 import functools
 import os
+import shutil
 import subprocess
 import threading
 import time
@@ -81,6 +85,12 @@ def _kinds_of_process(args: object) -> list[str]:
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    if not hasattr(config, "workerinput"):  # the session's controller, or pytest without -n
+        from eval_flights import share_on_disk
+
+        root = share_on_disk()
+        if root is not None:
+            config.add_cleanup(lambda: shutil.rmtree(root, ignore_errors=True))
     from groundstation.app.daemon import FlightDaemon
     from sim_device.realtime import SimDeviceProcess, SimDeviceThread
 

@@ -7,12 +7,21 @@ configuration (the plant's draws are seeded), so a flight flown once serves ever
 that needs the same one: the targets' worst case over the seeds, the short perturbed
 suite's report, ``gs eval``'s output, the Ch. 11 regression figures and their report.
 :func:`sharing_flights` puts the memo under :func:`sim_device.evaluation.run_eval` too,
-so a test that runs the whole ``gs eval`` flies only the flights no earlier test flew
-(in the same xdist worker: tests that share flights share an ``xdist_group``).
+so a test that runs the whole ``gs eval`` flies only the flights no earlier test flew.
+
+Across the xdist workers of one session the flights are shared on disk: the session's
+controller names a directory (:data:`MEMO_ENV`, set by ``tests/conftest.py``) and the first
+worker to need a flight flies it under a file lock while any other that needs it waits,
+then reads the pickled record. So tests that share flights need not share a worker.
 """
 
 from __future__ import annotations
 
+import fcntl
+import hashlib
+import os
+import pickle
+import tempfile
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -31,7 +40,21 @@ REPO = Path(__file__).resolve().parents[1]
 PERTURBED_SEEDS = (1, 2, 3, 4, 5)
 """The plants the targets are judged on (``gs eval --fast --perturb 1-5``)."""
 
+MEMO_ENV = "GS_TEST_FLIGHTS"
+"""The environment variable naming the session's directory of flown records (unset: each
+process keeps its own)."""
+
 _records: dict[tuple[str, str], FlightRecord] = {}
+
+
+def share_on_disk() -> Path | None:
+    """Name a fresh directory for this session's flights in :data:`MEMO_ENV` (inherited by
+    the xdist workers started after it) and return it; None if one is named already."""
+    if os.environ.get(MEMO_ENV):
+        return None
+    root = Path(tempfile.mkdtemp(prefix="gs-test-flights-"))
+    os.environ[MEMO_ENV] = str(root)
+    return root
 
 
 def base_config() -> GroundStationConfig:
@@ -44,8 +67,29 @@ def flown(scenario: Scenario, config: GroundStationConfig) -> FlightRecord:
     configuration) in this process."""
     key = (repr(scenario), dump_config(config))
     if key not in _records:
-        _records[key] = run_in_process(scenario, config)
+        _records[key] = _shared(key, scenario, config)
     return _records[key]
+
+
+def _shared(key: tuple[str, str], scenario: Scenario,
+            config: GroundStationConfig) -> FlightRecord:
+    """The flight from the session's directory, flown and written there by whichever
+    worker asked first (the others wait on its lock), or flown here if there is none."""
+    root = os.environ.get(MEMO_ENV)
+    if not root:
+        return run_in_process(scenario, config)
+    name = hashlib.sha256("\0".join(key).encode()).hexdigest()[:40]
+    path = Path(root) / f"{name}.pickle"
+    with open(Path(root) / f"{name}.lock", "w", encoding="utf-8") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if path.exists():
+            record: FlightRecord = pickle.loads(path.read_bytes())
+            return record
+        record = run_in_process(scenario, config)
+        partial = path.with_suffix(".partial")
+        partial.write_bytes(pickle.dumps(record, protocol=pickle.HIGHEST_PROTOCOL))
+        partial.replace(path)
+        return record
 
 
 @contextmanager

@@ -140,7 +140,6 @@ def test_plant_row_gives_deviations_from_the_model() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("perturbed-flights")  # its flights are the targets' (seeds 1, 2)
 def test_a_short_perturbed_suite_reports_every_seed_and_the_worst(tmp_path: Path) -> None:
     names = ["takeoff-h135", "yaw-turn"]
     with sharing_flights():
@@ -175,7 +174,6 @@ def test_a_short_perturbed_suite_reports_every_seed_and_the_worst(tmp_path: Path
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("perturbed-flights")  # its flight is the targets' (seed 3)
 def test_gs_eval_takes_perturb_seeds(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 

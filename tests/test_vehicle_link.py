@@ -29,6 +29,7 @@ import pytest
 from groundstation.asctec.blocks import AxisCounts, RcBlock, StatusBlock
 from groundstation.asctec.decoder import RejectedFrame, StreamDecoder, encode_frame
 from groundstation.asctec.dialect import VehicleLink, open_link
+from groundstation.asctec.keepalive import GAP_WARNING_S, WATCHDOG_S
 from groundstation.asctec.ll import (
     ImuRawData,
     LlRequestDecoder,
@@ -276,12 +277,15 @@ def test_keepalive_holds_the_rate_then_hands_back(vehicle: PtyVehicle) -> None:
     gaps = [b - a for a, b in itertools.pairwise(times)]
     assert times[-1] - times[0] >= 0.15  # held for about stale_command_s
     # resent every command period (50 Hz) plus the keep-alive's slack of one DATA period
-    # (10 ms: a loop sending on the DATA frames is never raced, asctec/keepalive.py), so
-    # the vehicle's 100 ms watchdog never expires. The gaps are read times of a responder
-    # thread, which a loaded machine holds up by tens of milliseconds now and then: the
-    # median is the keep-alive's period, the largest the watchdog's
-    assert sorted(gaps)[len(gaps) // 2] == pytest.approx(0.020 + 0.010, abs=0.005)
-    assert max(gaps) < 0.1
+    # (10 ms: a loop sending on the DATA frames is never raced), so the vehicle's 100 ms
+    # watchdog never expires. That period is proven on made-up times
+    # (test_asctec_keepalive.py); here the gaps are read times of a responder thread,
+    # and both threads are held up by a loaded machine, often enough for the median of
+    # these few gaps to move 10 ms (40 ms seen beside a busy loop): the median says the
+    # writer neither races the loop (under the period) nor is systematically late (the
+    # link's own gap warning, half the watchdog), the largest gap the watchdog's
+    assert 0.020 + 0.005 <= sorted(gaps)[len(gaps) // 2] < GAP_WARNING_S, gaps
+    assert max(gaps) < WATCHDOG_S
     assert stats.keepalive_resends >= 5
 
 
