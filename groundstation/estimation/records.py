@@ -58,7 +58,8 @@ class EkfParams:
         ``var * imu_period``.
     imu_period : IMU sample period the variances refer to [s] (100 Hz, Ch. 7.2).
     gyro_bias_walk, acc_bias_walk : bias random-walk densities [(rad/s)^2/s],
-        [(m/s^2)^2/s] (tuned; the thesis tuned Q by hand).
+        [(m/s^2)^2/s] (a lab MEMS IMU's temperature drift; ``estimator`` in the
+        configuration documents them).
     process_noise_scale : multiplies the IMU variances in Q.
     vicon_position_var : [m^2] (Table 6.1).
     vicon_quaternion_var : q0..q3 component variances (Table 6.1). The filter
@@ -114,8 +115,8 @@ class EkfParams:
     gyro_var: Vec3 = GYRO_VARIANCE_TABLE_6_3
     acc_var: Vec3 = ACC_VARIANCE_TABLE_6_3
     imu_period: float = 0.01
-    gyro_bias_walk: float = 1e-6
-    acc_bias_walk: float = 1e-4
+    gyro_bias_walk: float = 1e-8
+    acc_bias_walk: float = 1e-7
     process_noise_scale: float = 1.0
     vicon_position_var: Vec3 = VICON_POSITION_VARIANCE_TABLE_6_1
     vicon_quaternion_var: tuple[float, float, float, float] = VICON_QUATERNION_VARIANCE_TABLE_6_1
