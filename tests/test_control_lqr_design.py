@@ -73,6 +73,28 @@ def test_scalar_dlqr_matches_the_closed_form() -> None:
     assert K[0, 0] == pytest.approx(-a * b * p_closed / (r + b * b * p_closed), rel=1e-10)
 
 
+def test_a_design_asked_again_is_the_same_and_its_arrays_are_the_callers(plant) -> None:
+    """Designs are remembered per process: the second answer equals python-control's like
+    the first, whatever the first caller did to the arrays it got."""
+    Phi, Gamma, H = plant
+    Q = H.T @ Q_E @ H
+    K_ctrl, P_ctrl, _ = control.dlqr(Phi, Gamma, Q, R)
+    first, P_first = dlqr(Phi, Gamma, Q, R)
+    first *= 0.0
+    P_first[:] = np.nan
+    again, P_again = dlqr(Phi.copy(), Gamma.copy(), Q, R)
+    np.testing.assert_allclose(again, -K_ctrl, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(P_again, P_ctrl, rtol=1e-7, atol=1e-9)
+    A, B = _ab()
+    Phi1, Gamma1 = discretise(A, B, DT)
+    Phi1[:] = 0.0
+    Gamma1[:] = 0.0
+    np.testing.assert_array_equal(discretise(A, B, DT)[0], Phi)
+    np.testing.assert_array_equal(discretise(A, B, DT)[1], Gamma)
+    # another sample time is another design
+    assert not np.array_equal(discretise(A, B, 2 * DT)[0], Phi)
+
+
 def test_plant_gain_matches_python_control(plant) -> None:
     Phi, Gamma, H = plant
     gains = design_tracking_lqr(Phi, Gamma, H, Q_E, R, reference="position", dt=DT)

@@ -27,6 +27,7 @@ under constant disturbances); ``E`` is how the reference drives them.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -40,6 +41,23 @@ from groundstation.errors import ControlError
 from groundstation.types import FloatArray
 
 ReferenceKind = Literal["position", "velocity"]
+
+_Key = tuple[tuple[tuple[int, ...], bytes], ...]
+"""Arrays as a hashable key: each one's shape and float64 bytes."""
+
+_MEMO_SIZE = 64
+"""Designs remembered per process. A design is a pure function of its matrices, and every
+controller built from one configuration asks for the same ones (``gs eval`` builds one per
+flight, five flights of a scenario on the same design model): the matrix exponentials and
+the Riccati solution cost tens of milliseconds each time. Callers get copies."""
+
+
+def _key(*arrays: FloatArray) -> _Key:
+    return tuple((a.shape, np.ascontiguousarray(a, dtype=float).tobytes()) for a in arrays)
+
+
+def _arrays(key: _Key) -> list[FloatArray]:
+    return [np.frombuffer(data, dtype=float).reshape(shape) for shape, data in key]
 
 
 def _f64(x: object) -> FloatArray:
@@ -97,6 +115,13 @@ def discretise(A: FloatArray, B: FloatArray, dt: float) -> tuple[FloatArray, Flo
     Computed as one matrix exponential of ``[[A, B], [0, 0]] dt`` (Van Loan),
     the same as ``scipy.signal.cont2discrete(..., method="zoh")``.
     """
+    Phi, Gamma = _discretise(_key(_f64(A), _f64(B)), float(dt))
+    return Phi.copy(), Gamma.copy()
+
+
+@functools.lru_cache(maxsize=_MEMO_SIZE)
+def _discretise(key: _Key, dt: float) -> tuple[FloatArray, FloatArray]:
+    A, B = _arrays(key)
     n, m = B.shape
     block = np.zeros((n + m, n + m))
     block[:n, :n] = A
@@ -156,6 +181,13 @@ def dlqr(Phi: FloatArray, Gamma: FloatArray, Q: FloatArray,
     ``P`` solves the DARE (scipy ``solve_discrete_are``). Raises ControlError
     if the pair is not stabilisable / the weights not detectable.
     """
+    K, P = _dlqr(_key(_f64(Phi), _f64(Gamma), _f64(Q), _f64(R)))
+    return K.copy(), P.copy()
+
+
+@functools.lru_cache(maxsize=_MEMO_SIZE)
+def _dlqr(key: _Key) -> tuple[FloatArray, FloatArray]:
+    Phi, Gamma, Q, R = _arrays(key)
     try:
         P = scipy.linalg.solve_discrete_are(Phi, Gamma, Q, R)
     except (np.linalg.LinAlgError, ValueError) as exc:

@@ -30,6 +30,7 @@ scipy's discrete Riccati solution and the bandwidth against the filter's frequen
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -63,6 +64,7 @@ class AlphaBeta:
     bandwidth_rad_s: float
 
 
+@functools.lru_cache(maxsize=64)  # a pure function whose bandwidth search costs ~10 ms
 def alpha_beta(process_sd: float, sigma: float, period: float) -> AlphaBeta:
     """The steady-state filter for rate noise ``process_sd`` (``sqrt(q)`` [unit/s^2]),
     sample noise ``sigma`` [unit] and period ``period`` [s]; ControlError unless all > 0."""
