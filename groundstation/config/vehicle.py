@@ -183,8 +183,8 @@ class EstimatorConfig(ConfigModel):
         1e-10, 1e-2, "(rad/s)^2/s: at 1e-10 the bias is taken as fixed for hours (0.2 mrad/s "
         "in 10 min), at 1e-2 it wanders 0.1 rad/s in a second, no gyro's")] = 1e-8
     # gyro bias random walk [(rad/s)^2/s]: 2.4 mrad/s (0.14 deg/s) in 10 min, a MEMS gyro's
-    # temperature drift in a lab; the thesis tuned Q by hand. The 1e-6 tuned before let
-    # the bias estimate follow the noise: a 1 s Vicon loss drifted 3.0 cm, now 2.1
+    # temperature drift in a lab (the thesis tuned Q by hand); much larger walks let the
+    # bias estimate follow the noise, and dead reckoning through a Vicon loss drifts more
     acc_bias_walk: Annotated[float, within(
         1e-8, 1.0, "(m/s^2)^2/s: at 1e-8 the bias is taken as fixed for an hour (2.4 mm/s^2 "
         "in 10 min), at 1 it wanders 1 m/s^2 in a second, no accelerometer's")] = 1e-7
