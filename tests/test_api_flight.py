@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from lab_helpers import free_udp_port
+from lab_helpers import free_udp_port, realtime_sim_config
 
 from groundstation.client import (
     BadRequest,
@@ -49,7 +49,7 @@ from groundstation.client import (
     NotNow,
     OutsideVolume,
 )
-from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.config import GroundStationConfig, apply_overrides, dump_config
 from groundstation.fleetops.virtual import free_ports
 from sim_device.realtime import SimDeviceProcess
 
@@ -155,7 +155,7 @@ class Flight:
         self.control, self.telemetry = (f"tcp://127.0.0.1:{p}" for p in free_ports(2))
         self.truth_file = tmp / "truth.npz"
         self.cfg: GroundStationConfig = apply_overrides(
-            load_config(REPO / "config" / "sim.yaml"), {
+            realtime_sim_config(), {
                 "vicon.port": free_udp_port(), "telemetry.endpoint": self.telemetry,
                 "telemetry.control_endpoint": self.control,
                 "logging.flight_log_dir": str(tmp / "logs"),

@@ -24,12 +24,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from lab_helpers import free_udp_port
+from lab_helpers import free_udp_port, realtime_sim_config
 
 from groundstation.app.daemon import FlightDaemon, FlightSummary
 from groundstation.asctec.keepalive import WATCHDOG_S
 from groundstation.client import Client, Infeasible
-from groundstation.config import apply_overrides, dump_config, load_config
+from groundstation.config import apply_overrides, dump_config
 from groundstation.flight.assembly import assemble
 from groundstation.flight.commander import MAX_MOTION_S
 from groundstation.flight.supervisor import Outcome, State
@@ -74,7 +74,7 @@ def _tilt_deg(q: np.ndarray) -> np.ndarray:
 
 def test_a_long_plan_is_made_off_the_loop_and_the_commands_keep_their_rhythm(
         tmp_path: Path) -> None:
-    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {
+    cfg = apply_overrides(realtime_sim_config(), {
         "trajectory.name": "none", "vicon.port": free_udp_port(),
         "telemetry.endpoint": "tcp://127.0.0.1:*", "logging.flight_log_dir": str(tmp_path),
         "telemetry.control_endpoint": "tcp://127.0.0.1:*",

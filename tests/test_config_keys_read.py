@@ -24,7 +24,7 @@ from typing import Any
 
 import pytest
 import zmq.auth
-from lab_helpers import free_udp_port
+from lab_helpers import free_udp_port, realtime_sim_config
 from pydantic import BaseModel
 from typer.testing import CliRunner
 
@@ -37,7 +37,6 @@ from groundstation.config import (
     GroundStationConfig,
     apply_overrides,
     dump_config,
-    load_config,
 )
 from groundstation.flight.assembly import assemble
 from groundstation.flight.core import FlightCore
@@ -137,7 +136,7 @@ def _api(cfg: GroundStationConfig) -> MotionApi:
 @pytest.mark.realtime
 @pytest.mark.slow
 def test_every_configuration_key_is_read(tmp_path: Path) -> None:
-    base = apply_overrides(load_config(ROOT / "config" / "sim.yaml"), {
+    base = apply_overrides(realtime_sim_config(), {
         "trajectory.name": "hover", "vicon.port": free_udp_port(),
         "telemetry.endpoint": "tcp://127.0.0.1:*",
         "telemetry.control_endpoint": "tcp://127.0.0.1:*",

@@ -26,12 +26,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from lab_helpers import REPO, free_udp_port
+from lab_helpers import REPO, free_udp_port, realtime_sim_config
 
 from groundstation.app.daemon import FlightDaemon
 from groundstation.app.fly import EXIT_CODES, summary_lines
 from groundstation.app.recorder import LogLoss, read_flight
-from groundstation.config import apply_overrides, dump_config, load_config, validate_config
+from groundstation.config import apply_overrides, dump_config, validate_config
 from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import Outcome, State
 from sim_device.realtime import SimDeviceProcess
@@ -52,7 +52,7 @@ login shell on a terminal is such a leader; the kernel sends it SIGHUP on hangup
 def vehicle(tmp_path: Path) -> Iterator[tuple[SimDeviceProcess, Path]]:
     """The virtual lab in a process of its own, and a `gs fly` configuration file for it
     (a hover; the flight log under ``tmp_path/logs``)."""
-    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {
+    cfg = apply_overrides(realtime_sim_config(), {
         "trajectory.name": "hover", "vicon.port": free_udp_port(),
         "telemetry.endpoint": "tcp://127.0.0.1:*", "telemetry.control_endpoint": None,
         "logging.flight_log_dir": str(tmp_path / "logs"),

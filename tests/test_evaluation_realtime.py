@@ -15,8 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from lab_helpers import realtime_sim_config
 
-from groundstation.config import apply_overrides, load_config
+from groundstation.config import apply_overrides
 from groundstation.control.hinf import HinfController
 from groundstation.evaluation.metrics import error_norms
 from groundstation.evaluation.record import TIMING_REAL_TIME, TRUTH_LAB
@@ -32,7 +33,7 @@ REPO = Path(__file__).resolve().parents[1]
 @pytest.mark.realtime
 @pytest.mark.slow
 def test_real_time_hover_is_logged_aligned_and_reported(tmp_path: Path) -> None:
-    base = apply_overrides(load_config(REPO / "config" / "sim.yaml"),
+    base = apply_overrides(realtime_sim_config(),
                            {"logging.level": "warning"})
     scenario = Scenario("rt-hover", "test", "short real-time hover", "-", "hover", "lqr-cv",
                         2.0, vicon_hz=100.0, settle_s=0.5)
@@ -70,7 +71,7 @@ def test_real_time_hover_is_logged_aligned_and_reported(tmp_path: Path) -> None:
 
 def test_daemon_flies_the_scenarios_controller_and_trajectory(tmp_path: Path) -> None:
     # No flight: the daemon opens nothing before run().
-    base = apply_overrides(load_config(REPO / "config" / "sim.yaml"),
+    base = apply_overrides(realtime_sim_config(),
                            {"logging.flight_log_dir": str(tmp_path)})
     hinf = select(["hinf-rate-loop-model"])[0]
     daemon = build_daemon(hinf, scenario_config(hinf, base))

@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from lab_helpers import realtime_sim_config
 
 from groundstation.app.recorder import read_flight
 from groundstation.client import Fleet, NotNow
-from groundstation.config import load_config
 from groundstation.fleetops.judge import tracking
 from groundstation.fleetops.virtual import VirtualFleet, write_fleet
 from groundstation.flight.supervisor import State
@@ -41,7 +41,7 @@ def _transitions(log: Path) -> list[tuple[str, str]]:
 def killed(tmp_path_factory: pytest.TempPathFactory, fleet_alone: None) -> dict[str, Any]:
     """Three vehicles hover; v3's daemon is killed; later the relay is killed."""
     workdir = tmp_path_factory.mktemp("fleet-killed")
-    fleet_file = write_fleet(workdir, load_config(REPO / "config" / "sim.yaml"),
+    fleet_file = write_fleet(workdir, realtime_sim_config(),
                              [(-1.0, 0.0), (0.0, 0.0), (1.0, 0.0)], separation_m=0.5)
     lines: list[str] = []
     out: dict[str, Any] = {"lines": lines}
@@ -112,7 +112,7 @@ def drifted(tmp_path_factory: pytest.TempPathFactory, fleet_alone: None) -> dict
     """Two vehicles 0.7 m apart (separation 0.6 m); v2's pitch goes to the virtual pilot,
     whose pitch stick sits at +10 (0.011 rad/s nose up: it accelerates towards v1)."""
     workdir = tmp_path_factory.mktemp("fleet-drift")
-    fleet_file = write_fleet(workdir, load_config(REPO / "config" / "sim.yaml"),
+    fleet_file = write_fleet(workdir, realtime_sim_config(),
                              [(-0.35, 0.0), (0.35, 0.0)], separation_m=0.6,
                              overrides={"v2": {"sim.pilot_rate_sticks": [0, 10, 0]}})
     lines: list[str] = []

@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from lab_helpers import realtime_sim_config
 
 from groundstation.app.recorder import read_flight
 from groundstation.client import Fleet, Status, TooClose
-from groundstation.config import load_config
 from groundstation.fleetops.demo import homes
 from groundstation.fleetops.judge import rms, tracking
 from groundstation.fleetops.virtual import VirtualFleet, write_fleet
@@ -39,7 +39,7 @@ def flown(tmp_path_factory: pytest.TempPathFactory, fleet_alone: None) -> dict[s
     """Three vehicles 1 m apart: take off, hover, one motion refused and one flown, the
     status from the shell, the example's eights in phase and its landing."""
     workdir = tmp_path_factory.mktemp("fleet")
-    fleet_file = write_fleet(workdir, load_config(REPO / "config" / "sim.yaml"), homes(3),
+    fleet_file = write_fleet(workdir, realtime_sim_config(), homes(3),
                              separation_m=SEPARATION_M)
     lines: list[str] = []
     out: dict[str, Any] = {"lines": lines}

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from lab_helpers import free_udp_port
+from lab_helpers import free_udp_port, realtime_sim_config
 from scipy.spatial.transform import Rotation
 from test_foxglove import _decode as decode
 from test_foxglove import _descriptors as descriptors
@@ -42,7 +42,7 @@ from test_foxglove import _vec as vec
 from groundstation.app.daemon import FlightDaemon, FlightSummary
 from groundstation.app.fly import fly_command
 from groundstation.app.recorder import read_flight
-from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.config import GroundStationConfig, apply_overrides, dump_config
 from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import State
 from groundstation.telemetry import foxglove as fx
@@ -198,7 +198,7 @@ class X3dFlight:
 
 def _fly_x3d(tmp_path: Path) -> Iterator[X3dFlight]:
     endpoint = f"tcp://127.0.0.1:{_free_tcp_port()}"  # known before the daemon binds it
-    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {
+    cfg = apply_overrides(realtime_sim_config(), {
         "trajectory.name": "hover", "vicon.port": free_udp_port(),
         "telemetry.endpoint": endpoint, "logging.flight_log_dir": str(tmp_path),
         "telemetry.control_endpoint": "tcp://127.0.0.1:*",
@@ -512,7 +512,7 @@ def test_real_time_flight_in_the_asctec_ll_dialect(tmp_path: Path) -> None:
     """`gs fly --protocol asctec-ll`'s daemon against the virtual LL vehicle over a pty:
     polled IMU at 100 Hz, acknowledged commands, take-off, hover, landing and handback,
     judged from the lab's truth."""
-    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {
+    cfg = apply_overrides(realtime_sim_config(), {
         "serial.protocol": "asctec-ll", "trajectory.name": "hover",
         "vicon.port": free_udp_port(), "telemetry.endpoint": "tcp://127.0.0.1:*",
         "logging.flight_log_dir": str(tmp_path), "telemetry.control_endpoint": None,
@@ -549,7 +549,7 @@ def test_an_ll_vehicle_that_stops_answering_polls_is_link_loss(tmp_path: Path) -
     """The virtual LL vehicle stops answering polls in the air (its commands still reach
     it): the daemon stops at link loss, never flies blind, and the vehicle's fallback
     hands every channel back to the pilot."""
-    cfg = apply_overrides(load_config(REPO / "config" / "sim.yaml"), {
+    cfg = apply_overrides(realtime_sim_config(), {
         "serial.protocol": "asctec-ll", "trajectory.name": "hover",
         "vicon.port": free_udp_port(), "telemetry.endpoint": "tcp://127.0.0.1:*",
         "logging.flight_log_dir": str(tmp_path), "telemetry.control_endpoint": None,

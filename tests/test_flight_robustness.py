@@ -31,13 +31,13 @@ from typing import Any
 
 import numpy as np
 import pytest
-from lab_helpers import free_udp_port
+from lab_helpers import free_udp_port, realtime_sim_config
 from structlog.testing import capture_logs
 
 from groundstation.app.daemon import FlightDaemon
 from groundstation.app.fly import fly_command
 from groundstation.app.recorder import read_flight
-from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.config import GroundStationConfig, apply_overrides, dump_config
 from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import State
 from sim_device.realtime import SimDeviceProcess, SimDeviceThread
@@ -47,7 +47,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 
 def lab_config(tmp_path: Path, **overrides: object) -> GroundStationConfig:
-    return apply_overrides(load_config(REPO / "config" / "sim.yaml"), {
+    return apply_overrides(realtime_sim_config(), {
         "trajectory.name": "hover", "vicon.port": free_udp_port(),
         "telemetry.endpoint": "tcp://127.0.0.1:*", "telemetry.control_endpoint": None,
         "logging.flight_log_dir": str(tmp_path / "logs"),
@@ -238,10 +238,10 @@ def test_two_sigterms(tmp_path: Path, apart_s: float, landed: bool) -> None:
 
 def test_a_failsafe_landing_exits_1_with_a_warning(tmp_path: Path) -> None:
     """Finding 5: a landing forced by Vicon loss printed 'normal end' and exited 0."""
-    # Vicon goes at 10 s of the lab's clock: the vehicle is in the air by then (take-off
-    # starts ~3.2 s after the daemon and takes ~4.5 s; on a loaded machine it may still
-    # be climbing, and a landing forced there is as much the finding's).
-    cfg = lab_config(tmp_path, **{"sim.vicon.outages": [[10.0, 60.0]]})
+    # Vicon goes at 8 s of the lab's clock: the vehicle is in the air by then (take-off
+    # starts ~1.2 s after the daemon, REALTIME_SETTLE_S, and takes ~4.5 s; on a loaded
+    # machine it may still be climbing, and a landing forced there is as much the finding's).
+    cfg = lab_config(tmp_path, **{"sim.vicon.outages": [[8.0, 60.0]]})
     lines: list[str] = []
     with SimDeviceThread(cfg) as device, capture_logs() as logs:
         code = fly_command(assemble(apply_overrides(cfg, {"serial.port": device.info.pty_path})),
