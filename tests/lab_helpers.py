@@ -12,6 +12,7 @@ from groundstation.app.recorder import FlightRecorder
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
 from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import State
+from groundstation.lab import Lab
 
 REPO = Path(__file__).resolve().parents[1]
 LIVELY_WAYPOINTS = """t,x,y,z,yaw
@@ -61,13 +62,15 @@ def realtime_sim_config(**overrides: object) -> GroundStationConfig:
     return sim_config(**{"estimator.settle_time_s": REALTIME_SETTLE_S, **overrides})
 
 
-def fly_logged(cfg: GroundStationConfig, log_dir: Path,
-               duration_s: float) -> tuple[Path, FlightResult]:
-    """Fly ``cfg`` in-process (simulated clock) for ``duration_s`` of trajectory, recording
-    the flight log under ``log_dir``; the flight must end DONE. (log directory, result)."""
+def fly_logged(cfg: GroundStationConfig, log_dir: Path, duration_s: float | None,
+               lab: Lab | None = None) -> tuple[Path, FlightResult]:
+    """Fly ``cfg`` in-process (simulated clock) for ``duration_s`` of trajectory (None: one
+    period of it) against ``lab`` (None: the virtual lab of ``cfg``), recording the flight
+    log under ``log_dir``; the flight must end DONE. (log directory, result)."""
+    max_time_s = 300.0 if duration_s is None else duration_s + 40.0
     with FlightRecorder.create(log_dir, dump_config(cfg), META) as rec:
-        result = fly_in_process(assemble(cfg), duration_s=duration_s, max_time_s=duration_s + 40.0,
-                                recorder=rec)
+        result = fly_in_process(assemble(cfg), lab=lab, duration_s=duration_s,
+                                max_time_s=max_time_s, recorder=rec)
         directory = rec.directory
     assert result.final_state is State.DONE, result.transitions
     return directory, result

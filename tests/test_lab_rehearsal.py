@@ -37,15 +37,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from lab_helpers import META, free_udp_port, sim_config
+from lab_helpers import fly_logged, free_udp_port, sim_config
 from scipy.optimize import brentq
 
-from groundstation.app.inprocess import fly_in_process
-from groundstation.app.recorder import FlightRecorder
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
 from groundstation.fleetops.virtual import free_ports
-from groundstation.flight.assembly import assemble
-from groundstation.flight.supervisor import State
 from sim_device.lab import VirtualLab
 from sim_device.realtime import SimDeviceProcess
 
@@ -124,12 +120,7 @@ class Day:
         vehicle (its own configuration, not the user's), for one period of its trajectory;
         the flight log goes where ``gs fly`` would put it. Its directory."""
         log_dir = self.tmp / "state" / "groundstation" / "flightlogs"
-        with FlightRecorder.create(log_dir, dump_config(config), META) as recorder:
-            result = fly_in_process(assemble(config), lab=VirtualLab(self.vehicle),
-                                    max_time_s=300.0, recorder=recorder)
-            directory = recorder.directory
-        assert result.final_state is State.DONE, result.transitions
-        return directory
+        return fly_logged(config, log_dir, None, lab=VirtualLab(self.vehicle))[0]
 
     def fly(self, config: Path, *args: str) -> tuple[str, Path]:
         """``gs fly``; its output (stdout, then the log lines of stderr) and the flight log

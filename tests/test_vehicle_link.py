@@ -29,6 +29,7 @@ from groundstation.asctec.blocks import AxisCounts, RcBlock, StatusBlock
 from groundstation.asctec.decoder import RejectedFrame, StreamDecoder, encode_frame
 from groundstation.asctec.dialect import VehicleLink, open_link
 from groundstation.asctec.keepalive import GAP_WARNING_S, WATCHDOG_S
+from groundstation.asctec.link import ReceivedData
 from groundstation.asctec.ll import (
     ImuRawData,
     LlRequestDecoder,
@@ -239,15 +240,21 @@ def answered_late(sent: list[float], stamps: list[float], taken: float,
     return late + sum(1 for t in sent[len(stamps):] if taken - t > timeout)
 
 
-def samples(link: VehicleLink, n: int) -> list[DataMsg]:
-    out = []
+def received(link: VehicleLink, n: int) -> list[ReceivedData]:
+    """The next ``n`` samples with the reader's receive times."""
+    out: list[ReceivedData] = []
     deadline = time.monotonic() + WAIT
     while len(out) < n:
         assert time.monotonic() < deadline, f"only {len(out)} samples"
         rx = link.get(timeout=0.1)
         if rx is not None:
-            out.append(rx.msg)
+            out.append(rx)
     return out
+
+
+def samples(link: VehicleLink, n: int) -> list[DataMsg]:
+    """The next ``n`` samples."""
+    return [rx.msg for rx in received(link, n)]
 
 
 def test_the_stream_starts_on_request_and_delivers_the_counts(vehicle: PtyVehicle) -> None:
@@ -392,7 +399,7 @@ def test_ll_acknowledgements_are_timed_and_missing_ones_counted(latency: float) 
             stats = link.stats()
             taken = time.monotonic()
             elapsed = taken - t0 - latency
-            stamps = []
+            stamps: list[float] = []
             while (rx := link.get(timeout=0.0)) is not None:
                 stamps.append(rx.t)
     finally:
@@ -511,12 +518,7 @@ def test_ll_polls_hold_the_grid_and_slow_status_rc(latency: float) -> None:
             link.start_stream()
             origin = link._polls._next  # type: ignore[attr-defined]  # the grid's first slot
             t0 = time.monotonic()
-            stamps: list[float] = []
-            deadline = t0 + WAIT
-            while len(stamps) < 60:
-                assert time.monotonic() < deadline, f"only {len(stamps)} samples"
-                if (rx := link.get(timeout=0.1)) is not None:
-                    stamps.append(rx.t)
+            stamps = [rx.t for rx in received(link, 60)]
             rate = 59 / (time.monotonic() - t0 - latency)
             stats = link.stats()
             taken = time.monotonic()
