@@ -74,7 +74,8 @@ class ImuModel:
         """(6,) measured [gyro x, y, z (rad/s), acc x, y, z (m/s^2)] before the ADC."""
         truth = np.array(omega + specific_force)
         si: FloatArray = self._gain * (truth + self._bias + self._noise_row())
-        np.clip(si, -self._sat, self._sat, out=si)
+        np.maximum(si, -self._sat, out=si)  # np.clip's value, without its dispatch
+        np.minimum(si, self._sat, out=si)
         return si
 
     def sample(

@@ -199,6 +199,18 @@ def test_every_kind_has_exact_derivatives(kind: str, t: float) -> None:
     _fd_check(_kinds()[kind], t)
 
 
+@pytest.mark.parametrize(("span", "ramp"), [(8.0, 1.3), (6.2, 1.5), (3.0, 5.0), (1.0, 1.0)])
+def test_the_warps_clock_at_one_time_is_its_clocks_at_many_bit_for_bit(span: float,
+                                                                         ramp: float) -> None:
+    # the flight samples one time a tick (in scalars), the feasibility check many at once
+    warp = TimeWarp(FigureEight([0, 0, -1], width_m=1.2, period_s=8.0), span, ramp)
+    r, end = warp.ramp_s, warp.duration
+    edges = [0.0, r, end - r, end, math.nextafter(r, 0.0), math.nextafter(end - r, end)]
+    t = np.concatenate((np.linspace(-0.5, end + 0.5, 4001), edges))
+    np.testing.assert_array_equal(np.array([warp.clock(x) for x in t]),
+                                  np.array(warp.clocks(t)).T)
+
+
 def test_raw_and_smoothed_paths_say_their_jerk_is_zero_where_defined() -> None:
     # the independent answer: constant-speed segments and parabolic blends have no jerk
     for traj in (square(), square(smoothing_s=1.0)):

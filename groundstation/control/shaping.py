@@ -174,9 +174,26 @@ class TimeWarp:
         self.duration = self.span_s + self.ramp_s
 
     def clock(self, t: float) -> tuple[float, float, float, float]:
-        """``sigma(t)`` [s] and its first three derivatives."""
-        sg, s1, s2, s3 = self.clocks(np.array([float(t)]))
-        return float(sg[0]), float(s1[0]), float(s2[0]), float(s3[0])
+        """``sigma(t)`` [s] and its first three derivatives: :meth:`clocks` at one time, in
+        scalars (called every tick; the same operations in the same order)."""
+        r, end = self.ramp_s, self.duration
+        t = min(max(float(t), 0.0), end)
+        if t < r:
+            x = t / r
+        elif t > end - r:
+            x = (end - t) / r
+        else:
+            return t - 0.5 * r, 1.0, 0.0, 0.0
+        x2 = x * x
+        y = 1.0 - x
+        rate = 30.0 * x2 * (y * y)
+        bend = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x)
+        integral = x2 * x2 * (2.5 - 3.0 * x + x2)
+        step = x2 * x * (10.0 - 15.0 * x + 6.0 * x2)
+        s3 = bend / r ** 2
+        if t < r:
+            return r * integral, step, rate / r, s3
+        return self.span_s - r * integral, step, -rate / r, s3
 
     def clocks(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """``sigma`` [s] and its first three derivatives at the times ``t`` (n,): on a

@@ -104,7 +104,8 @@ class AxisScaling:
         """
         raw = np.rint(np.asarray(si, dtype=float) / self._k + self._z)
         lo, hi = self.count_range
-        return np.clip(raw, float(lo), float(hi))
+        # np.clip's value, without its Python-level dispatch (called for every IMU sample)
+        return np.minimum(np.maximum(raw, float(lo)), float(hi))
 
     def to_counts_int(self, si: FloatArray) -> tuple[int, int, int]:
         """Like :meth:`to_counts` but as a tuple of Python ints (for packing)."""
