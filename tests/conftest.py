@@ -19,7 +19,9 @@
   core and a half, the daemons under the FIFO policy) never runs beside a grounded
   virtual vehicle, whose tests time the link to the millisecond: both take one lock
   shared by the session's workers (``fleet_alone``, module-scoped, for a module's fleet
-  flights; every ``virtual_vehicle`` test, autouse).
+  flights; every ``virtual_vehicle`` test, autouse). The fleet's flights are collected
+  last, so they end the real-time lane after the grounded vehicles' lane is done: the
+  lock then keeps them apart without either waiting for the other.
 * structlog's configuration is put back after every test (``fresh_logging``): a command
   run in-process configures it (level, output), and a later test on the same worker that
   captures log events would otherwise see only those at the level that command set.
@@ -129,6 +131,10 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
                 item.add_marker(pytest.mark.xdist_group(group))
         if item.get_closest_marker("xdist_group") is None and _shares_a_module_fixture(item):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+    # The fleet's flights last (a stable sort: the order is otherwise kept): a group runs
+    # its tests in this order, so they end the real-time flights' lane, by when the
+    # grounded vehicles' shorter lane is done instead of waiting for the lock they take.
+    items.sort(key=lambda item: "fleet_alone" in item.fixturenames)  # type: ignore[attr-defined]
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
