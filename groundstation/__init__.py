@@ -20,8 +20,8 @@ and nothing imports in a circle (``tests/test_layers.py`` checks it from the sou
 __version__ = "0.1.0"
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("errors", "types", "endpoints", "logs", "timing"),  # the foundation: no import of
-    # the package
+    ("errors", "types", "endpoints", "logs", "timing", "lazy"),  # the foundation: no
+    # import of the package
     ("model",),  # physics and the thesis's numbers
     ("config", "asctec", "vicon", "estimation", "control"),  # the YAML schema; the pure
     # codecs, filters and controllers with their plain parameter records: none knows another

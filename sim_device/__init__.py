@@ -13,26 +13,31 @@
 Units SI, frames NED/FRD, quaternions scalar first (see :mod:`groundstation`).
 """
 
-from sim_device.lab import LabStats, VirtualLab
-from sim_device.params import (
-    FaultParams,
-    ImuParams,
-    LabParams,
-    LinkParams,
-    PilotParams,
-    PlantParams,
-    ViconSimParams,
-)
-from sim_device.realtime import (
-    SimDeviceInfo,
-    SimDeviceProcess,
-    SimDeviceResult,
-    SimDeviceThread,
-    run_sim_device,
-)
-from sim_device.truth import TruthLog, TruthState
-from sim_device.vicon import ViconDatagram
-from sim_device.wire import WireRecord
+from typing import TYPE_CHECKING
+
+from groundstation.lazy import reexports
+
+if TYPE_CHECKING:  # the names, imported from their modules on first use (groundstation.lazy)
+    from sim_device.lab import LabStats, VirtualLab
+    from sim_device.params import (
+        FaultParams,
+        ImuParams,
+        LabParams,
+        LinkParams,
+        PilotParams,
+        PlantParams,
+        ViconSimParams,
+    )
+    from sim_device.realtime import (
+        SimDeviceInfo,
+        SimDeviceProcess,
+        SimDeviceResult,
+        SimDeviceThread,
+        run_sim_device,
+    )
+    from sim_device.truth import TruthLog, TruthState
+    from sim_device.vicon import ViconDatagram
+    from sim_device.wire import WireRecord
 
 __all__ = [
     "FaultParams",
@@ -54,3 +59,6 @@ __all__ = [
     "WireRecord",
     "run_sim_device",
 ]
+
+if not TYPE_CHECKING:
+    __getattr__ = reexports(__name__)

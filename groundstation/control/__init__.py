@@ -13,59 +13,64 @@ and the trajectory reference and converts its output to sticks with
 >>> sticks, flags = to_sticks(out, StickParams.from_quadrotor(params))  # doctest: +SKIP
 """
 
-from groundstation.control.base import Controller, NullController
-from groundstation.control.disturbance import DisturbanceObserver
-from groundstation.control.external_force import ExternalForceObserver
-from groundstation.control.factory import make_controller
-from groundstation.control.feasibility import (
-    FeasibilityReport,
-    FlightLimits,
-    LimitNames,
-    Volume,
-    check_feasibility,
-)
-from groundstation.control.hinf import HinfController, HinfGain, load_hinf_gain
-from groundstation.control.lqr import LqrController
-from groundstation.control.lqr_design import (
-    TrackingGains,
-    design_tracking_lqr,
-    discretise,
-    dlqr,
-    riccati_iteration,
-)
-from groundstation.control.lqr_ff import FeedforwardLqr
-from groundstation.control.params import (
-    ControllerParams,
-    ExternalForceParams,
-    HinfParams,
-    LqrFfParams,
-    LqrParams,
-    PidParams,
-)
-from groundstation.control.pid import PidController
-from groundstation.control.shaping import MinJerkPath, TimeWarp, shape_for_flight
-from groundstation.control.sticks import (
-    CommandLimits,
-    SaturationFlags,
-    StickParams,
-    to_sticks,
-)
-from groundstation.control.trajectories import (
-    TrajectorySpec,
-    build_trajectory,
-    load_trajectory_file,
-    load_waypoints,
-    make_trajectory,
-    square,
-    yz_rectangle,
-)
-from groundstation.control.trajectory import (
-    FigureEight,
-    Hover,
-    PiecewiseLinear,
-    Trajectory,
-    YawTurn,
-)
+from typing import TYPE_CHECKING
+
+from groundstation.lazy import reexports
+
+if TYPE_CHECKING:  # the names, imported from their modules on first use (groundstation.lazy)
+    from groundstation.control.base import Controller, NullController
+    from groundstation.control.disturbance import DisturbanceObserver
+    from groundstation.control.external_force import ExternalForceObserver
+    from groundstation.control.factory import make_controller
+    from groundstation.control.feasibility import (
+        FeasibilityReport,
+        FlightLimits,
+        LimitNames,
+        Volume,
+        check_feasibility,
+    )
+    from groundstation.control.hinf import HinfController, HinfGain, load_hinf_gain
+    from groundstation.control.lqr import LqrController
+    from groundstation.control.lqr_design import (
+        TrackingGains,
+        design_tracking_lqr,
+        discretise,
+        dlqr,
+        riccati_iteration,
+    )
+    from groundstation.control.lqr_ff import FeedforwardLqr
+    from groundstation.control.params import (
+        ControllerParams,
+        ExternalForceParams,
+        HinfParams,
+        LqrFfParams,
+        LqrParams,
+        PidParams,
+    )
+    from groundstation.control.pid import PidController
+    from groundstation.control.shaping import MinJerkPath, TimeWarp, shape_for_flight
+    from groundstation.control.sticks import (
+        CommandLimits,
+        SaturationFlags,
+        StickParams,
+        to_sticks,
+    )
+    from groundstation.control.trajectories import (
+        TrajectorySpec,
+        build_trajectory,
+        load_trajectory_file,
+        load_waypoints,
+        make_trajectory,
+        square,
+        yz_rectangle,
+    )
+    from groundstation.control.trajectory import (
+        FigureEight,
+        Hover,
+        PiecewiseLinear,
+        Trajectory,
+        YawTurn,
+    )
 
 __all__ = [
     "CommandLimits",
@@ -115,3 +120,6 @@ __all__ = [
     "to_sticks",
     "yz_rectangle",
 ]
+
+if not TYPE_CHECKING:
+    __getattr__ = reexports(__name__)
