@@ -3,8 +3,10 @@
 A package's ``__init__`` names what its modules define for the reader and the type checker
 under ``if TYPE_CHECKING:``, and imports each module only when one of its names is first
 asked for. So ``import groundstation.model`` (the configuration does, for the vehicle's
-defaults) does not load scipy, and ``gs check-config`` or ``gs status`` does not load the
-controllers or the virtual lab: a `gs` start-up loads what its command uses.
+defaults) does not load scipy, reading a flight log does not load the flight, and ``gs
+status`` or ``gs --help`` does not load the controllers, the estimator or the virtual lab: a
+`gs` start-up loads what its command uses. Used by ``model``, ``estimation``, ``control``,
+``flight``, ``app`` and ``sim_device``.
 
 In a package's ``__init__``::
 

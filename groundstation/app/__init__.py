@@ -15,11 +15,16 @@ Each takes the flight's parameters (:func:`groundstation.flight.assemble`), neve
 configuration. The flight itself is :mod:`groundstation.flight`.
 """
 
-from groundstation.app.daemon import FlightDaemon, FlightSummary
-from groundstation.app.fly import AfterFlight, fly_command
-from groundstation.app.inprocess import FlightResult, InProcessFlight, fly_in_process
-from groundstation.app.recorder import FlightRecorder, read_flight
-from groundstation.app.replay import replay_flight
+from typing import TYPE_CHECKING
+
+from groundstation.lazy import reexports
+
+if TYPE_CHECKING:  # the names, imported from their modules on first use (groundstation.lazy)
+    from groundstation.app.daemon import FlightDaemon, FlightSummary
+    from groundstation.app.fly import AfterFlight, fly_command
+    from groundstation.app.inprocess import FlightResult, InProcessFlight, fly_in_process
+    from groundstation.app.recorder import FlightRecorder, read_flight
+    from groundstation.app.replay import replay_flight
 
 __all__ = [
     "AfterFlight",
@@ -33,3 +38,6 @@ __all__ = [
     "read_flight",
     "replay_flight",
 ]
+
+if not TYPE_CHECKING:
+    __getattr__ = reexports(__name__)

@@ -50,7 +50,6 @@ from groundstation.config import ZenohConfig
 from groundstation.config.fleetfile import FleetFile, load_fleet
 from groundstation.fleet import keys
 from groundstation.fleet.session import Membership, open_session
-from groundstation.flight.assembly import zenoh_params
 
 if TYPE_CHECKING:
     import zenoh
@@ -185,6 +184,10 @@ class Fleet:
         self.plan_wait_s = plan_wait_s
         who = identity or (spec.zenoh.operators[0] if spec.zenoh.operators else "operator")
         settings: ZenohConfig = spec.zenoh_for(who, [])
+        # here, not at the top: the assembly loads the whole flight, which `gs fleet status`
+        # and the other clients' start-up do not need
+        from groundstation.flight.assembly import zenoh_params
+
         self._session = open_session(zenoh_params(settings), Membership(
             spec.fleet, tuple(spec.names), operators=tuple(spec.zenoh.operators)))
         self._vehicles = {name: FleetVehicle(self, name) for name in spec.names}

@@ -17,11 +17,16 @@ one frozen bundle) and :mod:`.assembly` (the one place the configuration becomes
 What a user calls: ``FlightCore(assemble(load_config(path)))``, then :meth:`FlightCore.tick`.
 """
 
-from groundstation.flight.assembly import assemble, check_config
-from groundstation.flight.core import FlightCore, TickResult
-from groundstation.flight.inputs import DataFrontEnd, InputHealth, VehicleStatus
-from groundstation.flight.params import DaemonParams, FlightParams
-from groundstation.flight.supervisor import Outcome, State, Supervisor, SupervisorLimits
+from typing import TYPE_CHECKING
+
+from groundstation.lazy import reexports
+
+if TYPE_CHECKING:  # the names, imported from their modules on first use (groundstation.lazy)
+    from groundstation.flight.assembly import assemble, check_config
+    from groundstation.flight.core import FlightCore, TickResult
+    from groundstation.flight.inputs import DataFrontEnd, InputHealth, VehicleStatus
+    from groundstation.flight.params import DaemonParams, FlightParams
+    from groundstation.flight.supervisor import Outcome, State, Supervisor, SupervisorLimits
 
 __all__ = [
     "DaemonParams",
@@ -38,3 +43,6 @@ __all__ = [
     "assemble",
     "check_config",
 ]
+
+if not TYPE_CHECKING:
+    __getattr__ = reexports(__name__)
