@@ -21,6 +21,7 @@ from groundstation.estimation.imu_model import (
 )
 from groundstation.flight.assembly import ekf_params
 from groundstation.model.quaternion import normalize
+from groundstation.types import ImuSample, Pose
 
 G = 9.82
 
@@ -212,3 +213,54 @@ def test_diverged_flags_a_large_or_non_finite_covariance() -> None:
     assert ekf.diverged and ekf.health().diverged
     ekf._P[7, 7] = math.nan
     assert ekf.diverged
+
+
+def test_a_prediction_that_reuses_the_estimate_ahead_is_the_one_it_would_integrate(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # the flight core's order, one IMU sample behind: poses, predict to the held sample,
+    # then the estimate ahead to the new one. A filter never asked for the estimate ahead
+    # integrates every step itself; both must end bit for bit equal. Poses defeat the
+    # reuse: one newer than the filter splits the next step, one stamped at the filter
+    # time is fused at once and moves the state the estimate ahead started from
+    from groundstation.estimation import ekf as ekf_module
+
+    calls = {"n": 0}
+    original = ekf_module.propagate
+
+    def counted(*args: object) -> None:
+        calls["n"] += 1
+        original(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(ekf_module, "propagate", counted)
+    sim = TruthSimulator(square_reference(), seed=3)
+    asked, plain = Ekf(), Ekf()
+    start, first = sim.pose(), sim.imu()
+    for f in (asked, plain):
+        f.initialise(start, [first])
+    held: ImuSample | None = None
+    measured: list[Pose] = []  # the true pose at each sample, with Vicon's noise
+    counts = {"asked": 0, "plain": 0}
+    for k in range(600):
+        sim.step()
+        imu = sim.imu()
+        measured.append(sim.pose())
+        poses = []
+        if k % 10 == 0:
+            poses = [sim.pose(-0.004)]
+        elif k % 10 == 5:  # at the filter time: the sample predicted a tick ago
+            poses = [measured[-3]]
+            assert poses[0].t == asked.estimate().t
+        for name, f in (("asked", asked), ("plain", plain)):
+            calls["n"] = 0
+            for pose in poses:
+                assert f.update(pose).reason in ("deferred", "ok")
+            if held is not None:
+                f.predict(held)
+            if name == "asked":
+                f.estimate_ahead(imu)
+            counts[name] += calls["n"]
+        held = imu
+    np.testing.assert_array_equal(asked.state, plain.state)
+    np.testing.assert_array_equal(asked.error_covariance, plain.error_covariance)
+    # reused on most ticks: few more integrations than the plain filter's, not one a tick
+    assert counts["asked"] < counts["plain"] + 250, counts
