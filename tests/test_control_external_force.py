@@ -187,7 +187,10 @@ def test_it_holds_its_estimate_when_the_sample_cannot_be_trusted(case: str) -> N
 def test_the_loop_through_a_mispredicted_lift_has_small_gain() -> None:
     """``|((1 + e) e^{-j w Delta} - 1) F(e^{j w T})| < 1`` at every frequency, ``F`` the
     vertical estimate taken ``vertical_lead_s`` ahead, for lift per newton asked 0.74-1.35
-    times the model's (thrust map and mass 15 % off either way) and a delay 15 ms off."""
+    times the model's (thrust map and mass 15 % off either way) and a delay 15 ms off.
+    Necessary, not sufficient: it leaves out the vertical loop the path closes around (the
+    flights of tests/test_evaluation_disturbances.py on the corners of the lift's size and
+    timing are the proof)."""
     obs = ExternalForceObserver(PARAMS, T)
     f, lead = obs.fast[1], obs.vertical_lead_s
     w = np.linspace(1e-3, math.pi / T, 20_000)

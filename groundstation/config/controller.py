@@ -144,9 +144,11 @@ class ExternalForceConfig(ConfigModel):
     # the thrust takes the vertical estimate this far ahead (estimate + lead x rate): the
     # input delay, the motors' lag and the loop's response; tuned on gs eval --perturb
     motor_tau_s: Annotated[float, within(
-        0.0, 1.0, "s: motors slower than a second could not hold a hover")] = 0.02
-    # the lift's lag behind the command in the prediction; thesis silent, 20 ms typical of
-    # the class (sim.motor_tau_s)
+        0.0, 1.0, "s: motors slower than a second could not hold a hover")] = 0.08
+    # the lift's lag behind the command in the prediction: the slow end of what the vehicle
+    # may be (its motors, 20 ms nominal, plus any COMMAND delay beyond
+    # vehicle.command_delay_s), never faster: a prediction that leads the true lift lets the
+    # vertical loop run away; 80 ms covers motors up to 50 ms and 25 ms of extra delay
     min_height_m: Annotated[float, within(
         0.0, 1.0, "m: above a metre the estimate would never learn in a lab")] = 0.01
     # learns only this far above where the vehicle stood at take-off: below, the floor's
