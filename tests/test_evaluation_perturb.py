@@ -28,6 +28,8 @@ from sim_device.evaluation.perturb import (
     GYRO_BIAS_MAX,
     IMU_SCALE_ERROR,
     MASS_SPREAD,
+    MOTOR_TAU_RANGE_S,
+    PLANT_COLUMNS,
     RATE_GAIN_SPREAD,
     RATE_TAU_SPREAD,
     THRUST_SPREAD,
@@ -69,6 +71,7 @@ def test_draws_stay_inside_the_stated_ranges_and_fill_them() -> None:
         ([p["sim.command_delay_s"] for p in plants], *COMMAND_DELAY_RANGE_S),
         ([b for p in plants for b in p["sim.gyro_bias"]], -GYRO_BIAS_MAX, GYRO_BIAS_MAX),
         ([b for p in plants for b in p["sim.acc_bias"]], -ACC_BIAS_MAX, ACC_BIAS_MAX),
+        ([p["sim.motor_tau_s"] for p in plants], *MOTOR_TAU_RANGE_S),
     ]
     for values, lo, hi in checks:
         assert all(within(v, lo, hi) for v in values), (lo, hi)
@@ -96,6 +99,7 @@ def test_the_lab_built_from_a_drawn_plant_differs_from_the_model() -> None:
         assert lab.plant.thrust_scale == drawn["sim.thrust_scale"]
         assert lab.plant.rate_tau == drawn["sim.rate_loop_tau_s"]
         assert lab.link.command_delay == drawn["sim.command_delay_s"]
+        assert lab.plant.motor_tau_s == drawn["sim.motor_tau_s"]
         assert lab.imu.gyro_bias == pytest.approx(drawn["sim.gyro_bias"])
         assert lab.imu.acc_bias == pytest.approx(drawn["sim.acc_bias"])
         assert lab.imu.scale_error == IMU_SCALE_ERROR and lab.seed == seed
@@ -135,8 +139,9 @@ def test_plant_row_gives_deviations_from_the_model() -> None:
     row = plant_row(2, {"sim.k_rate_scale": [0.75, 1.0, 1.25], "sim.rate_loop_tau_s": 0.07,
                         "sim.mass_scale": 1.1, "sim.thrust_scale": 0.9,
                         "sim.command_delay_s": 0.0125, "sim.gyro_bias": [0.01, 0.0, -0.02],
-                        "sim.acc_bias": [0.1, 0.0, -0.1]})
+                        "sim.acc_bias": [0.1, 0.0, -0.1], "sim.motor_tau_s": 0.035})
     assert row[:6] == ["2", "-25.0 / +0.0 / +25.0", "70.0", "+10.0", "-10.0", "12.5"]
+    assert row[-1] == "35.0" and len(row) == len(PLANT_COLUMNS)
 
 
 @pytest.mark.slow

@@ -3,9 +3,9 @@
 Every scenario with a target (:data:`sim_device.evaluation.targets.TARGETS`) flies
 in-process on the plants of seeds 1-5 (`gs eval --fast --perturb 1-5`): rate gains
 +-30 % per axis, rate-loop time constant +-30 %, mass and thrust map +-15 %, command
-delay 5-30 ms, IMU scale errors and biases, Vicon at 10 Hz. The errors come from the
-virtual lab's ground truth. Deterministic for the seeds (simulated clock), so a
-failure is a change of behaviour, never load on the machine.
+delay 5-30 ms, the motors' lag 10-50 ms, IMU scale errors and biases, Vicon at 10 Hz.
+The errors come from the virtual lab's ground truth. Deterministic for the seeds
+(simulated clock), so a failure is a change of behaviour, never load on the machine.
 
 One test per flight (scenario and seed): a target holds for the worst case over the
 seeds exactly when it holds for each seed (the worst of these figures is their largest,
@@ -14,14 +14,14 @@ workers and none waits for another. A flight that another test also flies (the s
 perturbed suite, `gs eval --perturb 3`, the disturbances) is flown once in the session,
 by whichever worker needs it first (``eval_flights``).
 
-Reached (this code), worst over the seeds, against the issue's targets: square 0.25 /
-0.34 / 0.26 cm (1.0 off path / 1.5 in time / 2 per corner), at heading 135 deg 0.27 /
-0.34 / 0.29 cm; figure-eight 0.59 cm (2); yaw turn 0.36 cm (1.5) and 1.5 deg at the
-end (5); hover at 90/180/270 deg and after a take-off at 135 deg 0.33-0.39 cm (0.5);
-H-infinity on the drawn plant / rate gains 30 % low / high 0.52 / 0.59 / 0.46 cm (1);
-the trajectory files (dense eight 8 s / 4 s a lap, Crazyflie figure8.csv) 0.63 / 2.43 /
-1.61 cm (1 / 2.5 / 2.5); hover on exact-angle Vicon 0.37 cm (0.5); +20 % payload mid-eight
-0.78 cm over its lap (1.5); 3 m/s wind 0.35 cm (0.5).
+Reached (this code), worst over the seeds, against the issue's targets: square 0.26 /
+0.34 / 0.27 cm (1.0 off path / 1.5 in time / 2 per corner), at heading 135 deg 0.27 /
+0.33 / 0.31 cm; figure-eight 0.57 cm (2); yaw turn 0.35 cm (1.5) and 1.5 deg at the
+end (5); hover at 90/180/270 deg and after a take-off at 135 deg 0.35-0.42 cm (0.5);
+H-infinity on the drawn plant / rate gains 30 % low / high 0.48 / 0.58 / 0.50 cm (1);
+the trajectory files (dense eight 8 s / 4 s a lap, Crazyflie figure8.csv) 0.60 / 2.40 /
+1.61 cm (1 / 2.5 / 2.5); hover on exact-angle Vicon 0.38 cm (0.5); +20 % payload mid-eight
+0.82 cm over its lap (1.5); 3 m/s wind 0.36 cm (0.5).
 """
 
 from __future__ import annotations

@@ -84,9 +84,10 @@ So the prediction is set at the slow end of what a vehicle may be: ``motor_tau_s
 (:data:`DEFAULT_MOTOR_TAU_S`), which flies motors of 10-50 ms with COMMAND delays of 5-45 ms
 and lift 0.62-1.35 x the model (tests/test_evaluation_disturbances.py, judged by the truth).
 The price is in the payload's recovery: the controller's answering thrust arrives before the
-prediction says, so ``d`` is underestimated meanwhile (+20 % payload, worst of seeds 1-5:
-peak 2.2 -> 2.9 cm, back within 1 cm in 0.77 -> 1.10 s). A lab that knows its vehicle's
-lift lag (motors and delay) may set it closer, never below it.
+prediction says, so ``d`` is underestimated meanwhile (+20 % payload, worst of seeds 1-5
+with the lab's motors at 20 ms: peak 2.2 -> 2.9 cm, back within 1 cm in 0.77 -> 1.10 s).
+A lab that knows its vehicle's lift lag (motors and delay) may set it closer, never below
+it.
 The path's small gain in size and pure delay alone (``|((1 + e) e^{-s Delta} - 1) F|``
 below 1, 0.72 for lift 0.74-1.35 and a delay 15 ms off, tested) is necessary, not
 sufficient: it leaves out the vertical loop the path closes around, and a lead of 0.1 s at
@@ -143,7 +144,8 @@ the last this many samples (0.32 s at 50 Hz: a quarter of the fast value's noise
 DEFAULT_VERTICAL_LEAD_S = 0.07
 """How far ahead [s] the thrust takes the vertical estimate: the input delay (31 ms), the
 motors' lag (20 ms) and the loop's response to the velocity lost meanwhile; tuned on
-``gs eval --perturb`` (+20 % payload in hover, worst of 5, lift predicted 80 ms behind:
+``gs eval --perturb`` (+20 % payload in hover, worst of 5 with the lab's motors at 20 ms,
+lift predicted 80 ms behind:
 2.94 cm and back within 1 cm in 1.10 s at 0.07; 2.63 cm and 1.39 s at 0.1; at 0.04 the
 slow corner vehicle of tests/test_evaluation_disturbances.py ran away)."""
 DEFAULT_MOTOR_TAU_S = 0.08

@@ -1,6 +1,6 @@
 """Perturbed plants for ``gs eval --perturb SEED``: the virtual lab made to differ from the
 design model, drawn per seed from stated ranges (the spread a controller must stand: rate
-gains and their lag +-30 %, mass and thrust map +-15 %).
+gains and their lag +-30 %, mass and thrust map +-15 %, the motors' lag 10-50 ms).
 
 The controllers are designed on the vehicle section of the configuration (rate gains,
 rate-loop time constant, command delay, mass, thrust map); the virtual lab equals that
@@ -19,6 +19,7 @@ Every quantity is drawn uniformly and independently in its range, in this order,
 ``sim.command_delay_s``           in :data:`COMMAND_DELAY_RANGE_S`
 ``sim.gyro_bias`` (3)             +- :data:`GYRO_BIAS_MAX` per axis
 ``sim.acc_bias`` (3)              +- :data:`ACC_BIAS_MAX` per axis
+``sim.motor_tau_s``               in :data:`MOTOR_TAU_RANGE_S`
 ================================  =======================================================
 
 and fixed: ``sim.scale_error`` = :data:`IMU_SCALE_ERROR` (the lab draws each axis's
@@ -58,6 +59,10 @@ COMMAND_DELAY_RANGE_S = (0.005, 0.030)
 IMU_SCALE_ERROR = 0.03
 """Bound of each IMU axis's scale error [-] (``sim.scale_error``)."""
 
+MOTOR_TAU_RANGE_S = (0.010, 0.050)
+"""True lag of the lift behind the command [s]: half to two and a half times the class's
+20 ms (the virtual lab's nominal; the thesis is silent). Drawn last, so a seed's other draws
+are those of the box before it had this one."""
 GYRO_BIAS_MAX = 0.02
 """Gyro bias bound per axis [rad/s]."""
 
@@ -79,6 +84,7 @@ RANGES: dict[str, str] = {
     "IMU scale error": f"up to {100 * IMU_SCALE_ERROR:g} % per axis (drawn by the lab)",
     "gyro bias": f"+-{GYRO_BIAS_MAX:g} rad/s per axis",
     "accelerometer bias": f"+-{ACC_BIAS_MAX:g} m/s^2 per axis",
+    "motors' lag": f"{1e3 * MOTOR_TAU_RANGE_S[0]:g}-{1e3 * MOTOR_TAU_RANGE_S[1]:g} ms",
     "sensor noise": "seeded by the seed (sim.seed)",
 }
 """The ranges in words, for the report."""
@@ -107,10 +113,12 @@ def perturbation(seed: int, rate_loop_tau_s: float = NOMINAL_RATE_TAU_S) -> dict
     delay = float(rng.uniform(*COMMAND_DELAY_RANGE_S))
     gyro = [float(x) for x in rng.uniform(-GYRO_BIAS_MAX, GYRO_BIAS_MAX, 3)]
     acc = [float(x) for x in rng.uniform(-ACC_BIAS_MAX, ACC_BIAS_MAX, 3)]
+    motors = float(rng.uniform(*MOTOR_TAU_RANGE_S))
     return {
         "sim.seed": seed, "sim.k_rate_scale": k_rate, "sim.rate_loop_tau_s": tau * rate_loop_tau_s,
         "sim.mass_scale": mass, "sim.thrust_scale": thrust, "sim.command_delay_s": delay,
         "sim.scale_error": IMU_SCALE_ERROR, "sim.gyro_bias": gyro, "sim.acc_bias": acc,
+        "sim.motor_tau_s": motors,
     }
 
 
@@ -137,7 +145,7 @@ def parse_seeds(values: Iterable[str]) -> list[int]:
 
 PLANT_COLUMNS = ("seed", "rate gains x/y/z [%]", "rate loop tau [ms]", "mass [%]",
                  "thrust [%]", "delay [ms]", "gyro bias x/y/z [rad/s]",
-                 "acc bias x/y/z [m/s^2]")
+                 "acc bias x/y/z [m/s^2]", "motors [ms]")
 """Columns of :func:`plant_row`."""
 
 
@@ -155,4 +163,6 @@ def plant_row(seed: int, overrides: Mapping[str, Any]) -> list[str]:
             f"{1e3 * tau:.1f}" if tau is not None and math.isfinite(tau) else "-",
             pct(overrides["sim.mass_scale"]), pct(overrides["sim.thrust_scale"]),
             f"{1e3 * overrides['sim.command_delay_s']:.1f}",
-            vec(overrides["sim.gyro_bias"], "+.3f"), vec(overrides["sim.acc_bias"], "+.2f")]
+            vec(overrides["sim.gyro_bias"], "+.3f"), vec(overrides["sim.acc_bias"], "+.2f"),
+            f"{1e3 * motors:.1f}" if (motors := overrides.get("sim.motor_tau_s")) is not None
+            else "-"]

@@ -73,10 +73,10 @@ OPEN: dict[str, tuple[Target, ...]] = {
 figure reached; ``REACHED`` holds what it does reach, asserted in CI against regressions)."""
 
 REACHED: dict[str, tuple[Target, ...]] = {
-    "payload-hover-lqr-ff": (Target("event_peak_m", 0.033, "reached 2.94 cm; target: 2 cm"),
-                             Target("event_recover_s", 1.2, "reached 1.10 s; target: 1 s")),
-    "gust-hover-lqr-ff": (Target("event_peak_m", 0.033, "reached 2.95 cm; target: 2 cm"),),
-    "outage-1s-hover": (Target("outage_est_max_m", 0.029, "reached 2.61 cm; target: 1 cm"),),
+    "payload-hover-lqr-ff": (Target("event_peak_m", 0.033, "reached 3.03 cm; target: 2 cm"),
+                             Target("event_recover_s", 1.6, "reached 1.42 s; target: 1 s")),
+    "gust-hover-lqr-ff": (Target("event_peak_m", 0.032, "reached 2.91 cm; target: 2 cm"),),
+    "outage-1s-hover": (Target("outage_est_max_m", 0.029, "reached 2.59 cm; target: 1 cm"),),
 }
 """Bounds on the figures of :data:`OPEN` (reached, worst of seeds 1-5, plus ~10 %)."""
 
