@@ -118,7 +118,7 @@ def evaluate(
     Metrics come from the virtual lab's ground truth; the report is `report.md` with
     PNG figures mirroring Fig. 11.1-11.8 and `metrics.json`. With `--perturb` the
     virtual vehicle differs from the design model (rate gains, rate-loop lag, mass,
-    thrust, delay, IMU errors: see sim_device/evaluation/perturb.py).
+    thrust, delay, motors, IMU errors: see sim_device/evaluation/perturb.py).
     """
     from sim_device.evaluation import run_eval
     from sim_device.evaluation.perturb import parse_seeds
