@@ -44,7 +44,8 @@ weight) the vehicle rests on the floor: it cannot sink, its velocity and rates
 are zero and it sits level, keeping its heading. A descent through the floor
 lands it the same way; the accelerometer feels that touchdown as the deceleration
 ``-v_body / impact_time`` for ``impact_time`` (the integral is the velocity lost),
-so an estimator integrating the IMU sees the vehicle stop.
+so an estimator integrating the IMU sees the vehicle stop, also when its lift takes it
+off the floor again at once.
 """
 
 from __future__ import annotations
@@ -334,19 +335,25 @@ class Plant:
         In flight ``(0, 0, (b * lift + I_i v_3)/m)`` (``b`` the battery and the ground
         effect and a thrust fault; with ``PlantParams.wind`` the drag too, see the module
         doc); resting on the floor the contact force cancels gravity,
-        so ``-bCe [0, 0, g]`` = (0, 0, -g) when level.
+        so ``-bCe [0, 0, g]`` = (0, 0, -g) when level. For ``impact_time`` after a
+        touchdown the floor's deceleration is added, whether the vehicle stays down or its
+        lift takes it off again at once: the floor stopped it either way.
         """
-        p = self.params
+        fx, fy, fz = self._contact_force() if self.on_ground else self._flight_force()
+        if self.t < self._impact_until:  # still decelerating from the touchdown
+            ix, iy, iz = self._impact
+            return fx + ix, fy + iy, fz + iz
+        return fx, fy, fz
+
+    def _contact_force(self) -> tuple[float, float, float]:
+        """Specific force at rest on the floor, FRD [m/s^2]: the contact cancels gravity."""
+        g = self.params.g
         q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
-        if self.on_ground:
-            g = p.g
-            fx = -g * 2.0 * (q1 * q3 - q0 * q2)
-            fy = -g * 2.0 * (q2 * q3 + q0 * q1)
-            fz = -g * (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3)
-            if self.t < self._impact_until:  # still decelerating from the touchdown
-                ix, iy, iz = self._impact
-                return fx + ix, fy + iy, fz + iz
-            return fx, fy, fz
+        return (-g * 2.0 * (q1 * q3 - q0 * q2), -g * 2.0 * (q2 * q3 + q0 * q1),
+                -g * (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3))
+
+    def _flight_force(self) -> tuple[float, float, float]:
+        """Specific force in flight, FRD [m/s^2]: the lift, the inflow and the drag."""
         lift = self.lift_factor() * self.lift
         if self._aero is None:
             return (0.0, 0.0, (lift + self._inflow * self.vz) / self.mass)

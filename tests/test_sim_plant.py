@@ -202,3 +202,23 @@ def test_touchdown_is_felt_by_the_accelerometer() -> None:
     v_floor = math.sqrt(2.0 * G * 0.2)
     assert felt == pytest.approx(-v_floor, rel=0.03)  # one 2 ms step of slack
     assert plant.specific_force() == pytest.approx((0.0, 0.0, -G), abs=1e-12)  # then at rest
+
+
+def test_a_touchdown_that_lifts_off_again_is_felt_all_the_same() -> None:
+    """The floor stops the vehicle even when its lift (2 % over the weight here) takes it
+    off again at once: the accelerometer's non-gravity reading integrates to the velocity
+    the plant actually changed by, impact included (the reading alone, before, knew
+    nothing of the floor once the vehicle was airborne)."""
+    params = PlantParams(initial_position=(0.0, 0.0, -0.01), impact_time=0.05)
+    plant = Plant(params, 0.002)
+    plant.lift = plant.lift_sp = -1.02 * plant.mass * G  # up, a little over the weight
+    plant.vz = 0.3  # descending [m/s]
+    felt, v_start = 0.0, plant.vz
+    touched = lifted = False
+    for _ in range(100):  # 0.2 s: the touchdown and 0.15 s of flight after it
+        felt += (plant.specific_force()[2] + G) * plant.dt
+        plant.step()
+        touched = touched or plant.on_ground
+        lifted = lifted or (touched and not plant.on_ground)
+    assert touched and lifted
+    assert felt == pytest.approx(plant.vz - v_start, abs=0.3 * 0.03)  # one step of slack
