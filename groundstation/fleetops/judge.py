@@ -30,13 +30,16 @@ class Tracking:
     error: FloatArray
 
     def window(self, state: State, start_after_s: float = 0.0,
-               at_rest: bool = False) -> FloatArray:
-        """The errors [m] in ``state``, from ``start_after_s`` after the first row in it;
-        ``at_rest``: only rows whose reference does not move (a hover)."""
+               at_rest: bool = False, until: float | None = None) -> FloatArray:
+        """The errors [m] in ``state``, from ``start_after_s`` after the first row in it
+        up to the monotonic time ``until`` [s] (None: to the end); ``at_rest``: only rows
+        whose reference does not move (a hover)."""
         rows = self.state == int(state)
         if not rows.any():
             return np.zeros(0)
         rows &= self.t >= self.t[rows][0] + start_after_s
+        if until is not None:
+            rows &= self.t <= until
         if at_rest:
             step = np.r_[0.0, np.linalg.norm(np.diff(self.reference, axis=0), axis=1)]
             rows &= step < 1e-6
