@@ -575,3 +575,20 @@ def test_late_poses_are_counted() -> None:
         if k >= 2:
             assert ekf.update(poses[k - 1]).reason == "ok"  # stamped before the filter time
     assert ekf.health().late_poses == 38
+
+
+def test_a_repeated_pose_of_a_vehicle_standing_on_the_floor_is_fused() -> None:
+    """A sender without noise repeats a still vehicle's pose exactly; told the vehicle
+    stands, the filter fuses the repeat (its covariance shrinks as a fused pose's does)
+    and counts nothing as repeated."""
+    ekf, sim = _started()
+    sim.step()
+    ekf.predict(sim.imu())
+    pose = sim.pose()
+    assert ekf.update(pose).reason == "ok"
+    before = np.trace(ekf.error_covariance[0:3, 0:3])
+    again = ekf.update(Pose(pose.t, pose.position.copy(), pose.quaternion.copy(), 0),
+                       still=True)
+    assert again.reason == "ok" and again.accepted
+    assert np.trace(ekf.error_covariance[0:3, 0:3]) < before
+    assert ekf.health().repeated_poses == 0

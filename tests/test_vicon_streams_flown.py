@@ -1,6 +1,6 @@
 """Vicon streams of other characters, flown and judged by the truth (in-process, simulated
-clock): a simulator's sender with exact angles, a stream that starts while the object is
-occluded, and a second sender of our object beside the real one."""
+clock): a simulator's sender with exact angles or without any noise, a stream that starts
+while the object is occluded, and a second sender of our object beside the real one."""
 
 from __future__ import annotations
 
@@ -10,7 +10,9 @@ from lab_helpers import sim_config
 
 from groundstation.app.inprocess import FlightResult, InProcessFlight, fly_in_process
 from groundstation.flight.assembly import assemble
+from groundstation.flight.core import FlightCore
 from groundstation.flight.supervisor import State
+from groundstation.types import Pose
 from groundstation.vicon.decoder import ObjectPose, encode_datagram
 from groundstation.vicon.frames import FrameConversion
 from sim_device.vicon import foreign_stream
@@ -44,6 +46,49 @@ def test_a_sender_with_exact_angles_flies(rate_hz: float, limit_m: float) -> Non
     health = flight.pose_filter.health(result.lab.t)
     assert health.lost_held_identity == 0 and health.poses > 0.9 * rate_hz * 20
     assert hover_rms(result) < limit_m, hover_rms(result)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("rate_hz", "limit_m"), [(10.0, 0.005), (100.0, 0.005)])
+def test_a_sender_without_noise_flies(rate_hz: float, limit_m: float) -> None:
+    """A simulator's sender without noise: the standing vehicle's pose repeats exactly,
+    on the floor before take-off, while the thrust spools up and after touchdown. Before,
+    the filter skipped every repeat as a held sample, dead-reckoned on the IMU's biases
+    on the floor and the preflight refused the estimate (ABORTED, 1.9 m off). Judged by
+    the truth: the nominal flight, the estimate on the floor and the hover."""
+    cfg = sim_config(**{"trajectory.name": "hover", "sim.vicon.rate_hz": rate_hz,
+                        "sim.vicon.noise": False})
+    flight = InProcessFlight(assemble(cfg), duration_s=10.0)
+    result = flight.run(max_time_s=60.0)
+    assert [tr.new for tr in result.transitions] == [
+        State.TAKEOFF, State.TRACK, State.LAND, State.DISARM, State.DONE]
+    trace = result.trace
+    for state in (State.PREFLIGHT, State.TAKEOFF, State.DISARM):
+        rows = result.during(state) & np.isfinite(trace["est_pos"]).all(axis=1)
+        error = np.linalg.norm(trace["est_pos"][rows] - trace["true_pos"][rows], axis=1)
+        assert rows.any() and error.max() < 0.02, (state.name, error.max())
+    assert hover_rms(result) < limit_m, hover_rms(result)
+
+
+def test_only_a_sender_seen_to_repeat_the_standing_pose_has_its_repeats_fused_later() -> None:
+    """:meth:`FlightCore.standing`: before take-off always; after it, only for a sender
+    that repeated the standing pose exactly (no noise), and only at the floor's height.
+    Vicon's noise never repeats a pose, so a real lab's stream frozen anywhere stays a
+    loss."""
+
+    def pose(z: float, x: float = 0.0) -> Pose:
+        return Pose(0.0, np.array([x, 0.0, z]), np.array([1.0, 0.0, 0.0, 0.0]))
+
+    exact = FlightCore(assemble(sim_config()))
+    assert exact.standing(State.PREFLIGHT, [pose(-0.01)])
+    assert exact.standing(State.PREFLIGHT, [pose(-0.01)])  # repeated: no noise
+    assert exact.standing(State.TAKEOFF, [pose(-0.01)])  # still on the floor
+    assert exact.standing(State.LAND, [pose(0.02, x=0.4)])  # landed elsewhere
+    assert not exact.standing(State.TAKEOFF, [pose(-0.2)])  # in the air
+    assert not exact.standing(State.TRACK, [pose(-1.0)])
+    noisy = FlightCore(assemble(sim_config()))
+    assert noisy.standing(State.PREFLIGHT, [pose(-0.01), pose(-0.0101)])
+    assert not noisy.standing(State.TAKEOFF, [pose(-0.01)])
 
 
 @pytest.mark.slow

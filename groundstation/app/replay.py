@@ -124,7 +124,7 @@ def replay_flight(log: str, config: GroundStationConfig | None = None) -> Replay
         poses = [Pose(float(row["vicon_t"]), np.array(row["vicon_position"], dtype=float),
                       np.array(row["vicon_quaternion"], dtype=float))] \
             if row["vicon_valid"] else []
-        est = core.estimate_step(imu, poses)
+        est = core.estimate_step(imu, poses, still=core.standing(previous_state, poses))
         logged_ok = bool(np.all(np.isfinite(row["est_position"])))
         if est is not None and logged_ok:
             err = float(np.linalg.norm(est.position - row["est_position"]))

@@ -187,9 +187,9 @@ class ViconConfig(ConfigModel):
         2, 100, "poses [-]: never one (a stray pose); 100 is 10 s at 10 Hz, longer than "
         "Vicon may be lost before the flight lands")] = 3
     # consistent poses in a row before a pose stream is believed: at start-up, after a
-    # gap, for a new stream, and before the estimator re-anchors on poses it gated (issue
-    # 14: never one pose). 3: 20 ms late at 100 Hz, 0.2 s at 10 Hz; one stray pose is not
-    # enough, and a chance agreement of three is as unlikely as the gate allows
+    # gap, for a new stream, and before the estimator re-anchors on poses it gated (never
+    # one pose). 3: 20 ms late at 100 Hz, 0.2 s at 10 Hz; one stray pose is not enough,
+    # and a chance agreement of three is as unlikely as the gate allows
     source: Literal["udp", "zenoh"] = "udp"
     # where the object's datagrams come from: "udp", Tracker's stream on bind_address:port;
     # "zenoh", the fleet's `gs vicon-relay`, which receives that stream once for every

@@ -38,8 +38,9 @@ class Estimator(Protocol):
         """Advance with one IMU sample."""
         ...
 
-    def update(self, pose: Pose) -> UpdateResult:
-        """Fuse one Vicon pose."""
+    def update(self, pose: Pose, *, still: bool = False) -> UpdateResult:
+        """Fuse one Vicon pose; ``still``: the vehicle stands on the floor, so a pose
+        repeated exactly is a measurement of a vehicle that does not move."""
         ...
 
     def estimate(self) -> StateEstimate:
@@ -108,8 +109,8 @@ class PoseHoldEstimator:
         self._omega = np.array(imu.gyro, dtype=float)
         self._t = max(self._t, float(imu.t))
 
-    def update(self, pose: Pose) -> UpdateResult:
-        """Replace the held pose."""
+    def update(self, pose: Pose, *, still: bool = False) -> UpdateResult:
+        """Replace the held pose (``still`` changes nothing here)."""
         self._pose = pose
         self._updates += 1
         return UpdateResult(True, float("nan"), "ok")

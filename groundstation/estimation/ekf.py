@@ -49,7 +49,10 @@ that agree with each other (never on one pose):
   (:attr:`Ekf.overruled`) and the supervisor treats it as a failsafe.
 
 A repeated pose is one with identical values: a frame number alone says nothing
-(another sender may reuse Tracker's).
+(another sender may reuse Tracker's). The skip holds in the air only: on the floor a sender
+without noise (a simulator's) repeats the still vehicle's pose exactly, and skipping
+every pose would leave the filter to dead-reckon on the IMU's biases until the
+preflight refuses it (the caller says when the vehicle stands: ``update(still=)``).
 """
 
 from __future__ import annotations
@@ -218,11 +221,17 @@ class Ekf:
         self._hist.push(self._t, self._x, self._P, self._gyro, self._acc)
         self._check_finite()
 
-    def update(self, pose: Pose) -> UpdateResult:
-        """Fuse one Vicon pose at its own time stamp ``pose.t``; see :class:`UpdateResult`."""
+    def update(self, pose: Pose, *, still: bool = False) -> UpdateResult:
+        """Fuse one Vicon pose at its own time stamp ``pose.t``; see :class:`UpdateResult`.
+
+        ``still``: the vehicle stands on the floor (the caller knows: the flight core's
+        :meth:`~groundstation.flight.core.FlightCore.standing`). A pose that repeats the
+        previous one exactly is then fused: it is a still vehicle seen by a sender without
+        noise (a simulator's), and a held sample of a still vehicle is true as well.
+        Otherwise it is skipped as a held sample (see the module docstring)."""
         if not self._initialised:
             return _NOT_INIT
-        bad = self._screen(pose)
+        bad = self._screen(pose, still)
         if bad is not None:
             return bad
         t = float(pose.t)
@@ -385,8 +394,9 @@ class Ekf:
         self._last_pose = None
         self._last_imu = None
 
-    def _screen(self, pose: Pose) -> UpdateResult | None:
-        """Algorithm 1/2 and validity checks; None if the pose is usable."""
+    def _screen(self, pose: Pose, still: bool) -> UpdateResult | None:
+        """Algorithm 1/2 and validity checks; None if the pose is usable (``still``: see
+        :meth:`update`)."""
         p, q = pose.position.tolist(), pose.quaternion.tolist()
         n2 = sum(c * c for c in q)
         if len(p) != 3 or len(q) != 4 or not all(map(math.isfinite, p + q)) or abs(n2 - 1) > 0.1:
@@ -398,7 +408,8 @@ class Ekf:
             return UpdateResult(False, _NAN, "implausible")
         last = self._last_pose
         self._last_pose = pose
-        if last is not None and p == last.position.tolist() and q == last.quaternion.tolist():
+        if (not still and last is not None and p == last.position.tolist()
+                and q == last.quaternion.tolist()):
             self.repeated_poses += 1
             return UpdateResult(False, _NAN, "repeated")
         return None

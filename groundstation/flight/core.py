@@ -141,6 +141,9 @@ class FlightCore:
         self.init_report: InitReport | None = None
         self._settle_s = params.settle_time_s
         self._last_pose: Pose | None = None
+        self._standing_pose: Pose | None = None  # the newest pose before take-off
+        self._exact_sender = False  # repeated the standing vehicle's pose exactly
+        self._floor_z = math.nan  # height of the standing vehicle's pose [m], NED
         self._held: ImuSample | None = None
         self._estimate: StateEstimate | None = None
         self._judged = self._refused = 0  # the estimator's pose counts at the last tick
@@ -185,8 +188,8 @@ class FlightCore:
     def tick(self, t: float, imu: ImuSample | None, poses: Sequence[Pose],
              vehicle: VehicleStatus, health: InputHealth, stop_requests: int = 0) -> TickResult:
         """Advance the flight by one tick at monotonic time ``t`` [s]."""
-        self._estimate = self.estimate_step(imu, poses)
         old = self.supervisor.state
+        self._estimate = self.estimate_step(imu, poses, still=self.standing(old, poses))
         state = self.supervisor.update(self._observe(t, vehicle, health, stop_requests))
         position = self._position()
         if state is not old:
@@ -237,9 +240,38 @@ class FlightCore:
         return TickResult(self._command, False, self.supervisor.state, self.mission.reference(t),
                           self._estimate, None)
 
+    def standing(self, state: State, poses: Sequence[Pose]) -> bool:
+        """Whether ``poses`` (this tick's, in ``state``) show the vehicle standing on the
+        floor, so that one repeating the previous pose exactly is fused as a still
+        vehicle's (:meth:`Ekf.update <groundstation.estimation.ekf.Ekf.update>`); public
+        for replay.
+
+        Before take-off (PREFLIGHT) always: the vehicle stands still there whatever
+        sends its poses. Later only for a sender seen to repeat the standing vehicle's
+        pose exactly before take-off (one without noise: a simulator's; Vicon's noise
+        never repeats a pose) and only for poses at the floor's height then (within
+        ``landed_height_m``): the vehicle on the floor in take-off before it lifts off,
+        or landed. A pose repeated in the air is skipped, so a stream frozen there reads
+        as a Vicon loss.
+        """
+        if state is State.PREFLIGHT:
+            for pose in poses:
+                last, self._standing_pose = self._standing_pose, pose
+                if (last is not None and pose.position.tolist() == last.position.tolist()
+                        and pose.quaternion.tolist() == last.quaternion.tolist()):
+                    self._exact_sender = True
+            if self._standing_pose is not None:
+                self._floor_z = float(self._standing_pose.position[2])
+            return True
+        tolerance = self.supervisor.limits.landed_height_m
+        return self._exact_sender and all(abs(float(p.position[2]) - self._floor_z) < tolerance
+                                          for p in poses)
+
     # ------------------------------------------------------------------ steps
-    def estimate_step(self, imu: ImuSample | None, poses: Sequence[Pose]) -> StateEstimate | None:
+    def estimate_step(self, imu: ImuSample | None, poses: Sequence[Pose], *,
+                      still: bool = False) -> StateEstimate | None:
         """The estimator part of a tick (initialise, fuse poses, predict); public for replay.
+        ``still``: the poses show the vehicle standing on the floor (:meth:`standing`).
 
         The filter runs one IMU sample behind: this tick's sample is held, the filter
         advances to the previous one, and the estimate returned is the filter state
@@ -264,7 +296,7 @@ class FlightCore:
         # prediction step at its own time stamp; fusing it after the prediction would
         # make the EKF restore a checkpoint and re-propagate (same result, ~2x cost).
         for pose in poses:
-            self.ekf.update(pose)
+            self.ekf.update(pose, still=still)
         if imu is not None:
             if self._held is not None:
                 self.ekf.predict(self._held)

@@ -2,8 +2,8 @@
 
 Nominal run: one flight per scenario, its metrics. Perturbed run (``--perturb``): per
 scenario the worst case over the seeds with the seed that gave each figure, every
-seed's own metrics and transitions in ``metrics.json``, the drawn plants, and issue
-13's targets next to the worst-case figures.
+seed's own metrics and transitions in ``metrics.json``, the drawn plants, and the
+targets (:mod:`sim_device.evaluation.targets`) next to the worst-case figures.
 """
 
 from __future__ import annotations
