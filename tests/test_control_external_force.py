@@ -126,7 +126,7 @@ def test_a_constant_external_acceleration_is_learnt_on_every_axis() -> None:
     airborne(obs)  # hovering: F_z = 0, the lift holds the weight
     d = (0.4, -0.3, 1.5)  # wind, and a vehicle 15 % heavier
     force = (d[0], d[1], -PARAMS.g + d[2])
-    for _ in range(300):
+    for _ in range(1000):  # 20 s: the lift per newton's 1 s low-pass has settled too
         obs.sent(0.0, True)
         obs.update(level(-1.0, force))
     assert obs.estimate == pytest.approx(list(d), abs=1e-6)
@@ -202,3 +202,58 @@ def test_the_loop_through_a_mispredicted_lift_has_small_gain() -> None:
     worst = max(float(np.max(np.abs(((1.0 + e) * np.exp(-1j * w * delta) - 1.0) * F)))
                 for e in (0.85 / 1.15 - 1.0, 1.15 / 0.85 - 1.0) for delta in (-0.015, 0.015))
     assert worst < 0.75
+
+
+def hover_on(obs: ExternalForceObserver, effectiveness: float, f_z: float, steps: int
+             ) -> list[float]:
+    """Send ``f_z`` [N] for ``steps`` COMMANDs to a vehicle whose lift per newton is
+    ``effectiveness`` times the model's, at once (``obs`` without delay or motor lag, so its
+    prediction is the lift sent); the vertical estimate after each."""
+    lift = f_z - PARAMS.mass * PARAMS.g
+    out = []
+    for _ in range(steps):
+        obs.sent(f_z, True)
+        obs.update(level(-1.0, (0.0, 0.0, effectiveness * lift / PARAMS.mass)))
+        out.append(obs.estimate[2])
+    return out
+
+
+def instant(effectiveness_tau_s: float = 1.0) -> ExternalForceObserver:
+    """An observer whose lift model is the lift sent, at once."""
+    return ExternalForceObserver(PARAMS, T, motor_tau_s=0.0, delay_s=0.0,
+                                 effectiveness_tau_s=effectiveness_tau_s)
+
+
+@pytest.mark.parametrize(("truth", "learnt"), [(0.7, 0.7), (0.9, 0.9), (1.3, 1.0)])
+def test_the_lift_per_newton_is_learnt_where_it_is_below_the_models(truth: float,
+                                                                     learnt: float) -> None:
+    """A vehicle that gives ``truth`` of the lift the model predicts: the estimate is that
+    ratio, capped at the model's; and ``d`` holds the whole shortfall, ``(truth - 1) L / m``
+    (``L`` = the weight, so ``(1 - truth) g`` down), as it does without the estimate."""
+    obs = instant()
+    airborne(obs)
+    hover_on(obs, truth, 0.0, 1000)  # F_z = 0: the lift asked is the weight
+    assert obs.effectiveness == pytest.approx(learnt, abs=1e-9)
+    assert obs.estimate[2] == pytest.approx((1.0 - truth) * PARAMS.g, abs=1e-9)
+
+
+def test_the_commands_own_change_returns_in_d_only_as_slowly_as_the_estimate_follows() -> None:
+    """On a vehicle with 70 % of the model's lift per newton, a step of the thrust asked
+    (1 N more lift) shows in ``d`` as the shortfall ``(k - 1) dL / m`` (0.5 m/s^2 down):
+    through the vertical filter alone without the lift-per-newton estimate (0.2 s after
+    the step more than 80 % of it, at the filter's overshoot); with it only through its 1 s
+    low-pass, so 0.2 s after the step no more than ``1 - exp(-0.2)`` (18 %) of the
+    shortfall has come back, and the next command does not add the rest around the
+    vertical loop's 1 Hz."""
+    k, step = 0.7, 1.0
+    shortfall = (1.0 - k) * step / PARAMS.mass
+    changes = []
+    for tau in (0.0, 1.0):
+        obs = instant(tau)
+        airborne(obs)
+        before = hover_on(obs, k, 0.0, 1000)[-1]
+        after = hover_on(obs, k, -step, 10)  # F_z < 0: more lift up, for 0.2 s
+        changes.append(after[-1] - before)
+    without, with_estimate = changes
+    assert 0.8 * shortfall < without < 1.25 * shortfall
+    assert 0.0 < with_estimate <= -math.expm1(-0.2) * shortfall

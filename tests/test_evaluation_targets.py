@@ -21,7 +21,8 @@ end (5); hover at 90/180/270 deg and after a take-off at 135 deg 0.35-0.42 cm (0
 H-infinity on the drawn plant / rate gains 30 % low / high 0.48 / 0.58 / 0.50 cm (1);
 the trajectory files (dense eight 8 s / 4 s a lap, Crazyflie figure8.csv) 0.60 / 2.40 /
 1.61 cm (1 / 2.5 / 2.5); hover on exact-angle Vicon 0.38 cm (0.5); +20 % payload mid-eight
-0.82 cm over its lap (1.5); 3 m/s wind 0.36 cm (0.5).
+0.84 cm over its lap (1.5) and in hover back within 1 cm in 0.72 s (1); 3 m/s wind 0.36 cm
+(0.5).
 """
 
 from __future__ import annotations

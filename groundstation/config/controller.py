@@ -149,6 +149,13 @@ class ExternalForceConfig(ConfigModel):
     # may be (its motors, 20 ms nominal, plus any COMMAND delay beyond
     # vehicle.command_delay_s), never faster: a prediction that leads the true lift lets the
     # vertical loop run away; 80 ms covers motors up to 50 ms and 25 ms of extra delay
+    effectiveness_tau_s: Annotated[float, within(
+        0.0, 60.0, "s: over a minute a payload is never learnt; 0 turns it off")] = 1.0
+    # the lift per newton asked, against the model's (a payload or a thrust map that is off
+    # lowers it), from the lift predicted and the specific force low-passed over this time;
+    # where it is below the model's the prediction scales the command's own changes by it,
+    # or the estimate feeds the shortfall back and the vertical loop rings (payload in
+    # hover, worst of 5: back within 1 cm in 0.72 s, 1.42 s with 0)
     min_height_m: Annotated[float, within(
         0.0, 1.0, "m: above a metre the estimate would never learn in a lab")] = 0.01
     # learns only this far above where the vehicle stood at take-off: below, the floor's

@@ -65,5 +65,6 @@ def make_external_force(params: ExternalForceParams, vehicle: QuadrotorParams,
         horizontal_jerk=params.horizontal_jerk, quiet_tau_s=params.quiet_tau_s,
         detect_sigmas=params.detect_sigmas, hold_s=params.hold_s,
         vertical_lead_s=params.vertical_lead_s, motor_tau_s=params.motor_tau_s,
-        min_height_m=params.min_height_m, acc_variance=params.acc_variance,
-        limit_m_s2=params.limit_m_s2, acc_saturation=params.acc_saturation)
+        effectiveness_tau_s=params.effectiveness_tau_s, min_height_m=params.min_height_m,
+        acc_variance=params.acc_variance, limit_m_s2=params.limit_m_s2,
+        acc_saturation=params.acc_saturation)

@@ -31,6 +31,7 @@ class ExternalForceParams:
     hold_s : the fast filter stays on this long after a detection [s]
     vertical_lead_s : how far ahead the thrust takes the vertical estimate [s]
     motor_tau_s : the lift's lag behind the command [s]
+    effectiveness_tau_s : time constant of the lift-per-newton estimate [s] (0: none)
     min_height_m : it learns only this far above the take-off point [m]
     limit_m_s2 : clamp per axis [m/s^2]
     acc_variance : the accelerometer's noise per sample, per body axis [(m/s^2)^2]
@@ -44,6 +45,7 @@ class ExternalForceParams:
     hold_s: float
     vertical_lead_s: float
     motor_tau_s: float
+    effectiveness_tau_s: float
     min_height_m: float
     limit_m_s2: float
     acc_variance: tuple[float, float, float]

@@ -267,8 +267,9 @@ def external_force_params(x: ExternalForceConfig, vehicle: VehicleConfig) -> Ext
         fast_jerk=x.fast_jerk_m_s4, horizontal_jerk=x.horizontal_jerk_m_s4,
         quiet_tau_s=x.quiet_tau_s, detect_sigmas=x.detect_sigmas, hold_s=x.hold_s,
         vertical_lead_s=x.vertical_lead_s, motor_tau_s=x.motor_tau_s,
-        min_height_m=x.min_height_m, limit_m_s2=x.limit_m_s2,
-        acc_variance=(v[0], v[1], v[2]), acc_saturation=vehicle.acc_saturation)
+        effectiveness_tau_s=x.effectiveness_tau_s, min_height_m=x.min_height_m,
+        limit_m_s2=x.limit_m_s2, acc_variance=(v[0], v[1], v[2]),
+        acc_saturation=vehicle.acc_saturation)
 
 
 def hinf_design(h: HinfConfig, include_rate_loop: bool) -> HinfDesign:
