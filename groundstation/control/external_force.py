@@ -240,8 +240,8 @@ class ExternalForceObserver:
                 "effectiveness_tau_s, delay and min_height_m >= 0, limit, acc_saturation and "
                 "acc_variance > 0; found "
                 f"{period!r}, {fast_jerk!r}, {quiet_tau_s!r}, {detect_sigmas!r}, {hold_s!r}, "
-                f"{vertical_lead_s!r}, {effectiveness_tau_s!r}, "
-                f"{motor_tau_s!r}, {delay!r}, {min_height_m!r}, {limit_m_s2!r}, "
+                f"{vertical_lead_s!r}, {motor_tau_s!r}, {effectiveness_tau_s!r}, {delay!r}, "
+                f"{min_height_m!r}, {limit_m_s2!r}, "
                 f"{acc_saturation!r}, {acc_variance!r}")
         self.params = params
         self.period = period
