@@ -75,6 +75,8 @@ def main() -> int:
     parser.add_argument("--workers", default="4", help="pytest -n (make test: 4)")
     parser.add_argument("--top", type=int, default=30, help="modules to list")
     parser.add_argument("--slow", type=float, default=30.0, help="list tests over this [s]")
+    parser.add_argument("--rows", type=Path, help="also write every test's row here (TSV: "
+                        "node id, worker CPU, processes' CPU, wall [s])")
     parser.add_argument("pytest_args", nargs="*", help="after --: more pytest arguments")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="suite_cpu_") as folder:
@@ -87,6 +89,9 @@ def main() -> int:
         code = subprocess.run(command, cwd=REPO, env=env, check=False).returncode
         wall, total = time.monotonic() - wall0, _cpu(resource.RUSAGE_CHILDREN) - children0
         rows = _rows(Path(folder))
+    if args.rows:
+        args.rows.write_text("".join(f"{n}\t{o:.3f}\t{c:.3f}\t{w:.3f}\n" for n, o, c, w in rows),
+                             encoding="utf-8")
     own = sum(r[1] for r in rows)
     children = sum(r[2] for r in rows)
     print(f"\npytest: exit {code}, {len(rows)} tests, {wall:.0f} s wall, {total:.0f} s CPU in "
