@@ -73,6 +73,35 @@ def test_takeoff_climbs_vertically_then_moves_to_the_start() -> None:
     assert not m.takeoff_done(end, START + 0.2)  # reference there, vehicle not yet
 
 
+def test_the_configured_acceleration_limit_and_speeds_set_the_take_off_and_the_landing(
+        ) -> None:
+    """``safety.move_accel_m_s2`` through the assembly: at the default 0.5 m/s^2 a 1 m
+    climb takes 3.40 s whatever ``takeoff_speed_m_s`` above 0.29 m/s says; at 1 m/s^2 and
+    1 m/s, 2.47 s (the jerk limit, 4 m/s^3, binds), and a 1.1 m landing at 0.5 m/s 2.55 s."""
+    from groundstation.config import SafetyConfig, SerialConfig
+    from groundstation.flight.assembly import mission_params
+
+    for accel, climb_speed, land_speed in ((0.5, 0.5, 0.3), (0.5, 1.0, 0.3),
+                                            (1.0, 1.0, 0.5)):
+        safety = SafetyConfig(move_accel_m_s2=accel, takeoff_speed_m_s=climb_speed,
+                              land_speed_m_s=land_speed)
+        m = Mission.from_params(Line(), 10.0, mission_params(safety, SerialConfig()))
+        spool = SerialConfig().handover_blend_s
+        m.enter(State.TAKEOFF, 0.0, np.array([*START[:2], 0.0]), 0.0)  # straight up
+        climb = duration(1.0, climb_speed, accel, 4.0 * accel)
+        assert climb == pytest.approx({0.5: 3.398, 1.0: 2.466}[accel], abs=1e-3)
+        np.testing.assert_allclose(m.reference(spool + 0.5 * climb).position[2], -0.5,
+                                   atol=1e-12)  # halfway at half the time (symmetric)
+        assert not m.takeoff_done(spool + climb - 0.01, START)
+        assert m.takeoff_done(spool + climb, START)
+        m.enter(State.LAND, 50.0, START, 0.0)
+        land = duration(1.1, land_speed, accel, 4.0 * accel)  # 0.1 m below the floor
+        assert land == pytest.approx({0.5: 3.667, 1.0: 2.546}[accel], abs=1e-3)
+        np.testing.assert_allclose(m.reference(50.0 + land).position[2], 0.1, atol=1e-12)
+        np.testing.assert_allclose(m.reference(50.0 + 0.5 * land).position[2], -0.45,
+                                   atol=1e-12)
+
+
 def fd_check(m: Mission, t: float, h: float = 1e-3) -> None:
     """Velocity, acceleration and jerk against central differences of the positions, the
     heading rate against those of the heading (phases other than TRACK: no clock)."""

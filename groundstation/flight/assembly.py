@@ -321,11 +321,13 @@ def flight_volume(s: SafetyConfig) -> Volume:
 
 
 def mission_params(s: SafetyConfig, serial: SerialConfig) -> MissionParams:
-    """The phases around the trajectory: take-off and landing speeds, the heading turn's
-    rate (``safety``), the spool-up on the ground (``serial.handover_blend_s``)."""
+    """The phases around the trajectory: take-off and landing speeds and acceleration
+    limit, the heading turn's rate (``safety``), the spool-up on the ground
+    (``serial.handover_blend_s``)."""
     return MissionParams(climb_speed=s.takeoff_speed_m_s, land_speed=s.land_speed_m_s,
                          spool_s=serial.handover_blend_s,
-                         max_yaw_rate=math.radians(s.max_yaw_rate_deg_s))
+                         max_yaw_rate=math.radians(s.max_yaw_rate_deg_s),
+                         accel=s.move_accel_m_s2)
 
 
 def commander_params(t: TrajectoryConfig, api: ApiConfig) -> CommanderParams:

@@ -61,21 +61,24 @@ def wrap_angle(angle: float) -> float:
 CREEP_RAMP_S = 1.0
 """Time over which the landing's creep below the floor eases in [s]."""
 
-MOVE_JERK_M_S3 = 2.0
-"""Peak jerk [m/s^3] of a take-off or landing move: a horizontal jerk j turns the thrust
-at j / g, here 0.2 rad/s, far inside the rate limits whatever the move's length."""
+MOVE_JERK_PER_S = 4.0
+"""Peak jerk of a take-off or landing move per m/s^2 of its acceleration limit [1/s]
+(2 m/s^3 at the default 0.5 m/s^2): a horizontal jerk j turns the thrust at j / g, 0.2
+rad/s there and 0.4 at 1 m/s^2, far inside the rate limits whatever the move's length."""
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
 class MissionParams:
     """How the mission flies the phases around the trajectory: ``climb_speed`` and
     ``land_speed`` [m/s], ``spool_s`` on the ground at the start of take-off [s] (the
-    handover blend), ``max_yaw_rate`` of the take-off's heading turn [rad/s]."""
+    handover blend), ``max_yaw_rate`` of the take-off's heading turn [rad/s], ``accel``
+    the moves' acceleration limit [m/s^2]."""
 
     climb_speed: float
     land_speed: float
     spool_s: float
     max_yaw_rate: float
+    accel: float
 
 
 class Mission:
@@ -124,7 +127,7 @@ class Mission:
         """A mission flying ``trajectory`` for ``duration_s`` [s] as ``params`` describe."""
         return cls(trajectory, duration_s, climb_speed=params.climb_speed,
                    land_speed=params.land_speed, spool_s=params.spool_s,
-                   max_yaw_rate=params.max_yaw_rate)
+                   max_yaw_rate=params.max_yaw_rate, accel=params.accel)
 
     @property
     def ground(self) -> FloatArray:
@@ -167,7 +170,8 @@ class Mission:
         it) unless the acceleration limit asks for longer."""
         length = float(np.linalg.norm(end - start))
         duration = max(length / speed,
-                       min_jerk_duration(length, math.inf, self._accel, MOVE_JERK_M_S3))
+                       min_jerk_duration(length, math.inf, self._accel,
+                                         MOVE_JERK_PER_S * self._accel))
         return MinJerkSegment(t0, start.copy(), end.copy(), duration)
 
     def _plan_takeoff(self, t0: float, position: FloatArray, yaw: float, resumed: bool) -> None:
