@@ -56,10 +56,19 @@ real-time flight spends waiting is a second of every ``make test``. The EKF's gy
 settles in about 1.2 s; the preflight's checks still decide when the vehicle may go."""
 
 
+REALTIME_MOVES = {"safety.takeoff_speed_m_s": 1.0, "safety.land_speed_m_s": 0.5,
+                  "safety.move_accel_m_s2": 1.0}
+"""The take-off and landing of the real-time flights, twice as brisk as the shipped ones:
+a 1 m climb in 2.5 s instead of 3.4 s and the landing in 2.5 s instead of 3.7 s, for the
+same reason as :data:`REALTIME_SETTLE_S` (the in-process flights and the evaluation fly
+the shipped ones)."""
+
+
 def realtime_sim_config(**overrides: object) -> GroundStationConfig:
-    """``config/sim.yaml`` as the real-time flights fly it (:data:`REALTIME_SETTLE_S`),
-    with ``overrides`` (dotted keys)."""
-    return sim_config(**{"estimator.settle_time_s": REALTIME_SETTLE_S, **overrides})
+    """``config/sim.yaml`` as the real-time flights fly it (:data:`REALTIME_SETTLE_S`,
+    :data:`REALTIME_MOVES`), with ``overrides`` (dotted keys)."""
+    return sim_config(**{"estimator.settle_time_s": REALTIME_SETTLE_S, **REALTIME_MOVES,
+                         **overrides})
 
 
 def fly_logged(cfg: GroundStationConfig, log_dir: Path, duration_s: float | None,

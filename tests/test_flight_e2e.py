@@ -474,12 +474,14 @@ def test_foxglove_client_sees_the_flight(x3d_flight: X3dFlight) -> None:
 @pytest.mark.timeout(200)  # a process of up to 110 s on a loaded machine
 def test_demo_keeps_the_truth_with_the_log_and_reports_against_it(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """`gs fly --demo` (what `make demo` runs): the lab's truth ends up inside the flight's
+    """`gs fly --demo` (what `make demo` runs, here with the real-time flights' brisker
+    settling, take-off and landing): the lab's truth ends up inside the flight's
     directory, and the flight's report is judged against it, not against the estimate."""
+    config = tmp_path / "sim.yaml"
+    config.write_text(dump_config(realtime_sim_config()), encoding="utf-8")
     out = subprocess.run(
-        [sys.executable, "-m", "groundstation", "fly", "--config",
-         str(REPO / "config" / "sim.yaml"), "--demo", "--trajectory", "hover", "--duration", "2",
-         "--log-dir", str(tmp_path)],
+        [sys.executable, "-m", "groundstation", "fly", "--config", str(config), "--demo",
+         "--trajectory", "hover", "--duration", "2", "--log-dir", str(tmp_path)],
         capture_output=True, text=True, timeout=110, cwd=REPO)
     assert out.returncode == 0, out.stdout + out.stderr
     (log,) = [p for p in tmp_path.iterdir() if (p / "meta.json").exists()]
