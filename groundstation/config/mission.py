@@ -97,11 +97,12 @@ class SafetyConfig(ConfigModel):
     takeoff_speed_m_s: Speed = 0.5  # climb rate for take-off, tuned
     land_speed_m_s: Speed = 0.3  # descent rate when landing, tuned
     move_accel_m_s2: Annotated[float, within(
-        0.0, 5.0, "m/s^2: half a g asks a third of the hover thrust again of the rotors, "
+        0.0, 5.0, "m/s^2: half a g asks the rotors for half the hover thrust again, "
         "more than a take-off needs", lo_open=True)] = 0.5
-    # acceleration limit of the take-off's and the landing's moves, tuned: a move lasts
-    # as long as its mean speed says, or longer if this limit asks for it (a 1 m climb:
-    # 3.4 s at 0.5 m/s^2, 2.5 s at 1); the jerk is limited to 4 per second of it
+    # acceleration limit of the take-off's and the landing's moves (thesis silent; gs eval's
+    # figures are flown at 0.5): a move lasts as long as its mean speed says, or longer if
+    # this limit asks for it (a 1 m climb: 3.4 s at 0.5 m/s^2, 2.5 s at 1); the jerk is
+    # limited to 4 per second of it
     preflight_timeout_s: Annotated[float, within(
         0.0, 600.0, "s: ten minutes of preflight is a hung check", lo_open=True)] = 10.0
     # give up if checks do not pass
