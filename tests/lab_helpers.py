@@ -57,7 +57,7 @@ settles in about 1.2 s; the preflight's checks still decide when the vehicle may
 
 
 REALTIME_MOVES = {"safety.takeoff_speed_m_s": 1.0, "safety.land_speed_m_s": 0.5,
-                  "safety.move_accel_m_s2": 1.0}
+                  "safety.takeoff_land_accel_m_s2": 1.0}
 """The take-off and landing of the real-time flights, twice as brisk as the shipped ones:
 a 1 m climb in 2.5 s instead of 3.4 s and the landing in 2.5 s instead of 3.7 s, for the
 same reason as :data:`REALTIME_SETTLE_S` (the in-process flights and the evaluation fly

@@ -75,7 +75,7 @@ def test_takeoff_climbs_vertically_then_moves_to_the_start() -> None:
 
 def test_the_configured_acceleration_limit_and_speeds_set_the_take_off_and_the_landing(
         ) -> None:
-    """``safety.move_accel_m_s2`` through the assembly: at the default 0.5 m/s^2 a 1 m
+    """``safety.takeoff_land_accel_m_s2`` through the assembly: at the default 0.5 m/s^2 a 1 m
     climb takes 3.40 s whatever ``takeoff_speed_m_s`` above 0.29 m/s says; at 1 m/s^2 and
     1 m/s, 2.47 s (the jerk limit, 4 m/s^3, binds), and a 1.1 m landing at 0.5 m/s 2.55 s."""
     from groundstation.config import SafetyConfig, SerialConfig
@@ -83,7 +83,7 @@ def test_the_configured_acceleration_limit_and_speeds_set_the_take_off_and_the_l
 
     for accel, climb_speed, land_speed in ((0.5, 0.5, 0.3), (0.5, 1.0, 0.3),
                                             (1.0, 1.0, 0.5)):
-        safety = SafetyConfig(move_accel_m_s2=accel, takeoff_speed_m_s=climb_speed,
+        safety = SafetyConfig(takeoff_land_accel_m_s2=accel, takeoff_speed_m_s=climb_speed,
                               land_speed_m_s=land_speed)
         m = Mission.from_params(Line(), 10.0, mission_params(safety, SerialConfig()))
         spool = SerialConfig().handover_blend_s

@@ -96,7 +96,7 @@ class SafetyConfig(ConfigModel):
     # no DATA this long = link lost; at most 2 s (the vehicle's own watchdog is 100 ms)
     takeoff_speed_m_s: Speed = 0.5  # climb rate for take-off, tuned
     land_speed_m_s: Speed = 0.3  # descent rate when landing, tuned
-    move_accel_m_s2: Annotated[float, within(
+    takeoff_land_accel_m_s2: Annotated[float, within(
         0.0, 5.0, "m/s^2: half a g asks the rotors for half the hover thrust again, "
         "more than a take-off needs", lo_open=True)] = 0.5
     # acceleration limit of the take-off's and the landing's moves (thesis silent; gs eval's

@@ -327,7 +327,7 @@ def mission_params(s: SafetyConfig, serial: SerialConfig) -> MissionParams:
     return MissionParams(climb_speed=s.takeoff_speed_m_s, land_speed=s.land_speed_m_s,
                          spool_s=serial.handover_blend_s,
                          max_yaw_rate=math.radians(s.max_yaw_rate_deg_s),
-                         accel=s.move_accel_m_s2)
+                         accel=s.takeoff_land_accel_m_s2)
 
 
 def commander_params(t: TrajectoryConfig, api: ApiConfig) -> CommanderParams:
