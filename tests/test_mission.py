@@ -8,7 +8,9 @@ import math
 import numpy as np
 import pytest
 
+from groundstation.config import SafetyConfig, SerialConfig
 from groundstation.control.trajectory import YawTurn
+from groundstation.flight.assembly import mission_params
 from groundstation.flight.mission import CREEP_RAMP_S, Mission
 from groundstation.flight.supervisor import State
 from groundstation.types import Reference
@@ -78,9 +80,6 @@ def test_the_configured_acceleration_limit_and_speeds_set_the_take_off_and_the_l
     """``safety.takeoff_land_accel_m_s2`` through the assembly: at the default 0.5 m/s^2 a 1 m
     climb takes 3.40 s whatever ``takeoff_speed_m_s`` above 0.29 m/s says; at 1 m/s^2 and
     1 m/s, 2.47 s (the jerk limit, 4 m/s^3, binds), and a 1.1 m landing at 0.5 m/s 2.55 s."""
-    from groundstation.config import SafetyConfig, SerialConfig
-    from groundstation.flight.assembly import mission_params
-
     for accel, climb_speed, land_speed in ((0.5, 0.5, 0.3), (0.5, 1.0, 0.3),
                                             (1.0, 1.0, 0.5)):
         safety = SafetyConfig(takeoff_land_accel_m_s2=accel, takeoff_speed_m_s=climb_speed,
