@@ -46,7 +46,7 @@ from groundstation.vicon.decoder import (
 )
 from sim_device.config import sim_section
 from sim_device.lab import VirtualLab
-from sim_device.realtime import _add_arrays, _Pty, default_truth_path
+from sim_device.realtime import _add_arrays, _Pty, default_truth_path, exchange
 from sim_device.vicon import ViconDatagram
 from sim_device.wire import WireTiming
 
@@ -184,12 +184,10 @@ def _loop(fleet: Sequence[_Vehicle], sock: socket.socket, target: tuple[str, int
             incoming = v.pty.read()
             if incoming:
                 v.wire.received(time.monotonic(), incoming)
-            for _, frame in v.lab.advance_to(now):
+            for _, frame in exchange(v.lab, now, incoming):
                 v.pty.write(frame)
                 v.wire.frame_sent(time.monotonic(), frame)
             groups.append(v.lab.vicon_datagrams())
-            if incoming:
-                v.lab.write(incoming)
         for _, data in merge_datagrams(groups, pad_to):
             try:
                 sock.sendto(data, target)

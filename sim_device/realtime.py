@@ -12,7 +12,8 @@ and the real-time modes share one plant, one firmware and one Vicon.
   the client stops reading, the backlog is flushed rather than replayed later.
 * **Vicon.** Datagrams go to ``(sim.vicon.target_address, vicon.port)`` over UDP.
 * **Clock.** Every ``tick`` (default one plant step) the lab advances to the wall
-  time, incoming bytes are written at that time, and output is sent when its
+  time, incoming bytes are written at that time (after a stall of this process, at the
+  stall's start: :func:`exchange`), and output is sent when its
   simulated delivery time has come; deadlines advance by the tick (no drift) and
   late ticks are counted as overruns.
 * **Wire timing.** The instant each DATA frame's last byte is written to the pty
@@ -38,6 +39,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import math
 import os
 import select
 import signal
@@ -270,13 +272,47 @@ class _Io:
     unplug: threading.Event | None
 
 
+STALL_S = 0.02
+"""A wake-up of the real-time loop this much later than the time the lab was advanced to
+[s] (ten plant steps; the loop wakes every step or on a byte) is a stall of the virtual
+lab's own process: a loaded machine did not run it."""
+
+
+def exchange(lab: VirtualLab, now: float, incoming: bytes) -> list[tuple[float, bytes]]:
+    """Advance ``lab`` to ``now`` [s] with ``incoming``, the bytes this wake-up read from the
+    ground station; the frames due (:meth:`VirtualLab.advance_to`).
+
+    The bytes go in after the advance, at the instant the ground station's write woke the
+    loop. After a stall of this process (a wake-up more than :data:`STALL_S` late) they were
+    written at unknown instants during it, and a stall of the simulator is not a COMMAND gap
+    of the ground station (the vehicle's 100 ms watchdog would hand back to the pilot for
+    it): they go in spread evenly over the stall, from its start, in pieces at most
+    :data:`STALL_S` apart. A ground station that wrote nothing meanwhile is judged by its
+    gap as before."""
+    late = now - lab.t
+    if not incoming or late <= STALL_S:
+        frames = lab.advance_to(now)
+        if incoming:
+            lab.write(incoming)
+        return frames
+    frames = []
+    start = lab.t
+    pieces = math.ceil(late / STALL_S)
+    size = math.ceil(len(incoming) / pieces)
+    for k in range(pieces):
+        frames += lab.advance_to(start + late * k / pieces)
+        lab.write(incoming[k * size:(k + 1) * size])
+    frames += lab.advance_to(now)
+    return frames
+
+
 def _loop(lab: VirtualLab, io: _Io, stop: threading.Event, tick: float,
           duration: float | None, counters: dict[str, int], start: float) -> None:
     """The real-time loop: advance to the wall clock, exchange bytes, sleep to the next tick.
 
     start : ``time.monotonic()`` of simulated time 0 [s]. Bytes from the ground station
-    are read (and stamped) before the lab advances, and handed to the lab after it, as
-    they always were: the stamp is the instant the ground station's write woke the loop.
+    are read (and stamped) before the lab advances, and handed to the lab by
+    :func:`exchange`: the stamp is the instant the ground station's write woke the loop.
     """
     deadline = tick
     end = float("inf") if duration is None else duration
@@ -290,7 +326,7 @@ def _loop(lab: VirtualLab, io: _Io, stop: threading.Event, tick: float,
         incoming = b"" if pty.closed else pty.read()
         if incoming:
             wire.received(time.monotonic(), incoming)
-        for _, frame in lab.advance_to(now):
+        for _, frame in exchange(lab, now, incoming):
             if not pty.closed:
                 pty.write(frame)
                 wire.frame_sent(time.monotonic(), frame)
@@ -299,8 +335,6 @@ def _loop(lab: VirtualLab, io: _Io, stop: threading.Event, tick: float,
                 io.sock.sendto(dgram.data, io.target)
             except OSError:
                 counters["vicon_errors"] += 1
-        if incoming:
-            lab.write(incoming)
         if now > deadline + tick:
             counters["overruns"] += 1
             deadline = now

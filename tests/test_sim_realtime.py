@@ -23,7 +23,8 @@ from groundstation.asctec.decoder import StreamDecoder, encode_frame
 from groundstation.asctec.messages import CommandMsg, ConfigMsg, DataMsg
 from groundstation.config import GroundStationConfig, apply_overrides, load_config
 from groundstation.vicon.decoder import ViconFrame, decode_datagram
-from sim_device import SimDeviceThread
+from sim_device import LabParams, SimDeviceThread, VirtualLab
+from sim_device.realtime import STALL_S, exchange
 
 
 def _config(repo: Path, port: int, truth: Path) -> GroundStationConfig:
@@ -112,3 +113,33 @@ def test_signal_stops_the_run_and_writes_truth(repo: Path, tmp_path: Path, signu
     assert child.returncode == 0
     assert "ground truth" in rest and str(truth) in rest
     assert len(np.load(truth)["t"]) > 0
+
+
+def test_a_stall_of_the_simulator_is_not_a_command_gap_of_the_ground_station() -> None:
+    """The real-time loop's step (:func:`sim_device.realtime.exchange`) on the virtual X-3D's
+    own firmware: COMMANDs every 20 ms, then the lab's process wakes 150 ms late with the
+    seven COMMANDs the ground station wrote meanwhile waiting in the pty. They go in spread
+    over the stall, so the 100 ms watchdog (spec) does not hand back to the pilot; a ground
+    station that wrote nothing in the same stall is handed back; and an ordinary wake-up
+    (one plant step late) writes its bytes after the advance, as before: a COMMAND then
+    needs its full transport time to apply."""
+    command = encode_frame(CommandMsg(thrust=1000, ctrl=0x0F))
+    for meanwhile, handbacks in ((command * 7, 0), (b"", 1)):
+        lab = VirtualLab(LabParams(), seed=1)
+        t = 0.0
+        for _ in range(20):  # 0.4 s of COMMANDs at 50 Hz, on time
+            t += 0.02
+            exchange(lab, t, command)
+        assert lab.firmware.applied_mask == 0x0F
+        t += 0.15  # the stall: well over the watchdog's 100 ms
+        assert t - lab.t > STALL_S
+        exchange(lab, t, meanwhile)
+        assert lab.stats().handbacks == handbacks, len(meanwhile)
+        exchange(lab, t + 0.05, b"")  # the last one's transport time
+        assert lab.stats().commands == 20 + len(meanwhile) // len(command)  # all, once
+    lab = VirtualLab(LabParams(), seed=1)
+    exchange(lab, 0.002, command)  # written at 2 ms: on the wire 4 ms, delayed 20 ms
+    exchange(lab, 0.0259, b"")
+    assert lab.firmware.applied_mask == 0
+    exchange(lab, 0.0261, b"")
+    assert lab.firmware.applied_mask == 0x0F
