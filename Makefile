@@ -27,15 +27,24 @@ typecheck: install
 # tests (tests/conftest.py); so more workers than the 2 cores of CI's machine.
 WORKERS ?= 4
 
+# The suite starts some hundreds of Python processes (gs commands, virtual labs, its
+# workers). Where the caller's environment sets PYTHONDONTWRITEBYTECODE (the development
+# machine's did), each of them compiled the package from source again: 16 % of the CPU of
+# the suite's command-line tests. So the tests write and read bytecode as Python does by
+# default (__pycache__, ignored by git), compiled once before the workers start.
+BYTECODE := env -u PYTHONDONTWRITEBYTECODE
+
 pytest: install
-	$(BIN)/pytest -q -n $(WORKERS) --dist loadgroup
+	$(BYTECODE) $(BIN)/python -m compileall -q groundstation sim_device
+	$(BYTECODE) $(BIN)/pytest -q -n $(WORKERS) --dist loadgroup
 
 test: lint typecheck pytest
 
 # The edit-run loop: no real-time flight and no long simulation (under 90 s); `make test`
 # runs everything
 test-fast: install
-	$(BIN)/pytest -q -n 2 -m "not realtime and not virtual_vehicle and not slow"
+	$(BYTECODE) $(BIN)/python -m compileall -q groundstation sim_device
+	$(BYTECODE) $(BIN)/pytest -q -n 2 -m "not realtime and not virtual_vehicle and not slow"
 
 # `make demo PROTOCOL=asctec-ll` flies the virtual AscTec LL vehicle instead of the X-3D;
 # `make demo FLEET=3` a virtual fleet through the Vicon relay (README "Fleet")

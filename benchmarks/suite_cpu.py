@@ -4,9 +4,10 @@ it ran, with its wall time; summed per module.
     .venv/bin/python benchmarks/suite_cpu.py                        # the suite, as make test
     .venv/bin/python benchmarks/suite_cpu.py --top 20 -- -m "not realtime" tests/test_cli.py
 
-Runs pytest as `make test` does (``-n 4 --dist loadgroup``; anything after ``--`` goes to
-pytest as well) with this file as a plugin (``-p suite_cpu``, in every worker). Around each
-test it reads the worker's ``getrusage``:
+Runs pytest as `make test` does (``-n 4 --dist loadgroup``, bytecode written and read
+whatever ``PYTHONDONTWRITEBYTECODE`` says; anything after ``--`` goes to pytest as well)
+with this file as a plugin (``-p suite_cpu``, in every worker). Around each test it reads
+the worker's ``getrusage``:
 
 * ``RUSAGE_SELF``: the worker's own CPU, its threads included (an in-process flight, a
   daemon flown in a thread, the virtual lab in a thread);
@@ -83,6 +84,9 @@ def main() -> int:
         env = {**os.environ, OUT_ENV: folder,
                "PYTHONPATH": os.pathsep.join(filter(None, (str(REPO / "benchmarks"),
                                                            os.environ.get("PYTHONPATH"))))}
+        env.pop("PYTHONDONTWRITEBYTECODE", None)  # as the Makefile's pytest target
+        subprocess.run([sys.executable, "-m", "compileall", "-q", "groundstation", "sim_device"],
+                       cwd=REPO, env=env, check=True)
         command = [sys.executable, "-m", "pytest", "-q", "-n", args.workers,
                    "--dist", "loadgroup", "-p", "suite_cpu", *args.pytest_args]
         wall0, children0 = time.monotonic(), _cpu(resource.RUSAGE_CHILDREN)
