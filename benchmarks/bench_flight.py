@@ -58,6 +58,7 @@ from groundstation.config import (  # noqa: E402
     dump_config,
     load_config,
 )
+from groundstation.endpoints import free_ports  # noqa: E402
 from groundstation.flight.assembly import assemble  # noqa: E402
 from sim_device.realtime import SimDeviceProcess  # noqa: E402
 from sim_device.wire import WireRecord  # noqa: E402
@@ -75,9 +76,7 @@ def rss_mb() -> float:
 
 
 def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    return free_ports(1, socket.SOCK_DGRAM)[0]
 
 
 @dataclass

@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import ipaddress
 import re
+import secrets
+import socket
+from pathlib import Path
 
 _HOST_LABEL = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)$")
 
@@ -127,3 +130,55 @@ def zenoh_local(endpoint: str) -> bool:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:  # a host name: it may resolve anywhere
         return False
+
+
+EPHEMERAL_LOW_DEFAULT = 32768
+"""Linux's lowest ephemeral port when ``/proc/sys/net/ipv4/ip_local_port_range`` cannot be
+read (its default, 32768-60999)."""
+
+FREE_PORT_SPAN = 12000
+"""How many ports below the ephemeral range :func:`free_ports` draws from."""
+
+_issued: set[tuple[int, int]] = set()
+"""(socket kind, port) this process has handed out."""
+
+
+def _ephemeral_low() -> int:
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return EPHEMERAL_LOW_DEFAULT
+
+
+def free_ports(count: int, kind: int = socket.SOCK_STREAM) -> list[int]:
+    """``count`` different loopback ports of ``kind`` (``socket.SOCK_STREAM`` or
+    ``SOCK_DGRAM``) that nothing is bound to now, for a virtual lab's Vicon stream and its
+    endpoints.
+
+    The ports are drawn at random from the :data:`FREE_PORT_SPAN` ports just below the
+    kernel's ephemeral range, never from it: a port the kernel hands to ``bind(0)`` is
+    free only until its next ephemeral allocation, and every connecting TCP client and
+    every UDP sender that never bound (a virtual Vicon) takes one, so the port could be
+    gone before the daemon binds it ("Address already in use"). Below the range only an
+    explicit bind can take it, and this process never issues the same port twice.
+    """
+    high = _ephemeral_low()
+    low = max(1024, high - FREE_PORT_SPAN)
+    ports: list[int] = []
+    for _ in range(100 * count):
+        if len(ports) == count:
+            return ports
+        # not the random module: a test that seeds it would make every process draw alike
+        port = secrets.randbelow(high - low) + low
+        if (kind, port) in _issued or port in ports:
+            continue
+        with socket.socket(socket.AF_INET, kind) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+        _issued.add((kind, port))
+        ports.append(port)
+    if len(ports) == count:
+        return ports
+    raise OSError(f"no {count} free loopback ports between {low} and {high - 1}")

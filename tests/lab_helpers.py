@@ -10,6 +10,7 @@ from pathlib import Path
 from groundstation.app.inprocess import FlightResult, fly_in_process
 from groundstation.app.recorder import FlightRecorder
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.endpoints import free_ports
 from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import State
 from groundstation.lab import Lab
@@ -37,10 +38,9 @@ META = {"supervisor_states": [s.name for s in State]}
 
 
 def free_udp_port() -> int:
-    """A UDP port nothing on loopback is bound to now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A UDP port nothing on loopback is bound to now (:func:`free_ports`: not one the
+    kernel may hand to a sender before the daemon binds it)."""
+    return free_ports(1, socket.SOCK_DGRAM)[0]
 
 
 def sim_config(**overrides: object) -> GroundStationConfig:

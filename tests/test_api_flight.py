@@ -50,7 +50,7 @@ from groundstation.client import (
     OutsideVolume,
 )
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config
-from groundstation.fleetops.virtual import free_ports
+from groundstation.endpoints import free_ports
 from sim_device.realtime import SimDeviceProcess
 
 REPO = Path(__file__).resolve().parents[1]

@@ -20,6 +20,7 @@ import pytest
 from groundstation.client import Fleet, TooClose
 from groundstation.config import ZenohConfig, load_config, validate_config
 from groundstation.config.fleetfile import load_fleet
+from groundstation.endpoints import free_ports
 from groundstation.errors import FleetError
 from groundstation.fleet import keys
 from groundstation.fleet.messages import Intent, PeerPose
@@ -28,7 +29,7 @@ from groundstation.fleet.peers import TERMINAL_STATES, PeerTable
 from groundstation.fleet.posesource import ZenohPoseSource
 from groundstation.fleet.relay import ViconRelay
 from groundstation.fleet.session import Membership, open_session
-from groundstation.fleetops.virtual import free_ports, write_fleet
+from groundstation.fleetops.virtual import write_fleet
 from groundstation.flight.assembly import assemble, zenoh_params
 from groundstation.flight.commander import CommandRefusedError, PlanBase, Rest, plan_go_to
 from groundstation.flight.params import FlightParams, ZenohParams

@@ -20,7 +20,6 @@ import contextlib
 import json
 import select
 import signal
-import socket
 import struct
 import subprocess
 import sys
@@ -43,6 +42,7 @@ from groundstation.app.daemon import FlightDaemon, FlightSummary
 from groundstation.app.fly import fly_command
 from groundstation.app.recorder import read_flight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config
+from groundstation.endpoints import free_ports
 from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import State
 from groundstation.telemetry import foxglove as fx
@@ -57,9 +57,7 @@ GS_IN_PROCESS = [sys.executable, "-c", "import sys; from groundstation.cli impor
 
 
 def _free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    return free_ports(1)[0]
 
 
 def _read_line(stream: Any, timeout: float) -> str:

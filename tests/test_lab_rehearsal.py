@@ -41,7 +41,7 @@ from lab_helpers import fly_logged, free_udp_port, sim_config
 from scipy.optimize import brentq
 
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.fleetops.virtual import free_ports
+from groundstation.endpoints import free_ports
 from sim_device.lab import VirtualLab
 from sim_device.realtime import SimDeviceProcess
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from groundstation.config import apply_overrides, dump_config, load_config
-from groundstation.fleetops.virtual import free_ports
+from groundstation.endpoints import free_ports
 from groundstation.vicon.decoder import ObjectPose, ViconFrame, decode_datagram, encode_datagram
 from sim_device.config import sim_section
 from sim_device.fleet import merge_datagrams, vehicles_in_a_row

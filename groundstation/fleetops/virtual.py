@@ -27,23 +27,12 @@ from typing import Any
 import yaml
 
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config
+from groundstation.endpoints import free_ports
 from groundstation.errors import GroundStationError
 from groundstation.fleetops.manager import FleetProcesses, gs_command
 
 LAB_START_S = 60.0
 """How long the virtual lab may take to announce itself [s] (a loaded machine)."""
-
-
-def free_ports(count: int, kind: int = socket.SOCK_STREAM) -> list[int]:
-    """``count`` different loopback ports nothing is bound to now."""
-    sockets = [socket.socket(socket.AF_INET, kind) for _ in range(count)]
-    try:
-        for s in sockets:
-            s.bind(("127.0.0.1", 0))
-        return [int(s.getsockname()[1]) for s in sockets]
-    finally:
-        for s in sockets:
-            s.close()
 
 
 def write_fleet(workdir: Path, base: GroundStationConfig, homes: Sequence[tuple[float, float]],

@@ -32,6 +32,7 @@ from groundstation.app.inprocess import InProcessFlight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config
 from groundstation.control.factory import make_controller
 from groundstation.control.simulate import SimPlant, SimResult, simulate
+from groundstation.endpoints import free_ports
 from groundstation.errors import GroundStationError
 from groundstation.evaluation.record import FlightRecord, record_from_log, record_from_trace
 from groundstation.flight.assembly import assemble
@@ -90,10 +91,9 @@ def run_in_process(scenario: Scenario, base: GroundStationConfig) -> FlightRecor
 
 
 def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A UDP port on 127.0.0.1 that nothing is bound to now
+    (:func:`groundstation.endpoints.free_ports`)."""
+    return free_ports(1, socket.SOCK_DGRAM)[0]
 
 
 def build_daemon(scenario: Scenario, cfg: GroundStationConfig) -> FlightDaemon:
