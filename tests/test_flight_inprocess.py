@@ -97,27 +97,30 @@ def test_vicon_outage_holds_then_resumes(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_long_vicon_outage_lands_on_the_imu_and_never_disarms_in_the_air(
-        tmp_path: Path) -> None:
+@pytest.mark.parametrize("thrust_scale", [1.0, 0.9])
+def test_long_vicon_outage_lands_on_the_imu_and_stays_down(tmp_path: Path,
+                                                           thrust_scale: float) -> None:
     """Vicon goes for good: hold on the IMU, then land on it. The dead-reckoned height
-    drifts (here it went through the floor while the vehicle lifted off again), so it is
-    no evidence of the floor: the flight ends disarmed only if the accelerometer felt the
-    floor, else handed back to the pilot with the thrust it had, never with the motors
-    idled in the air."""
-    result = run_logged(sim_config(), tmp_path, 30.0,
-                        [(9.0, lambda f: f.lab.vicon_outage(30.0))])
+    goes through the floor and the accelerometer reads 1 g whether the vehicle rests or
+    descends steadily, so the landing feels for the floor (flight/touchdown.py): the
+    vehicle touched down and, with the controller's hover thrust, lifted off again 0.3 to
+    0.7 m before the unconfirmed landing handed it back. Judged by the truth: once down it
+    stays down, and the flight ends disarmed on the floor, a failsafe all the same. The
+    lab's rotors as modelled and 10 % weak."""
+    cfg = sim_config(**{"sim.thrust_scale": thrust_scale})
+    result = run_logged(cfg, tmp_path, 30.0, [(9.0, lambda f: f.lab.vicon_outage(30.0))])
     seq = states(result)
-    assert seq[:4] == [State.TAKEOFF, State.TRACK, State.HOLD, State.LAND]
+    assert seq == [State.TAKEOFF, State.TRACK, State.HOLD, State.LAND, State.DISARM,
+                   State.DONE], result.transitions
     assert "Vicon lost" in result.transitions[3].reason
+    assert "ground contact felt" in result.transitions[4].reason
     assert not result.success
-    disarm = result.during(State.DISARM)
     height = -result.trace["true_pos"][:, 2]
-    if State.DISARM in seq:
-        assert "ground contact felt" in result.transitions[4].reason
-        assert height[disarm].max() < 0.1 and on_the_ground(result)
-    else:
-        assert result.final_state is State.HANDBACK
-        assert result.trace["sticks"][:, 3][result.during(State.LAND)].min() > 0
+    landing = np.flatnonzero(result.during(State.LAND))
+    touched = landing[0] + np.flatnonzero(height[landing[0]:] < 0.005)[0]
+    assert height[touched:].max() < 0.02, height[touched:].max()  # never off the floor again
+    disarm = result.during(State.DISARM)
+    assert height[disarm].max() < 0.01 and on_the_ground(result)
 
 
 def narrow_volume(flight: InProcessFlight) -> None:

@@ -52,6 +52,7 @@ from groundstation.flight.mission import Mission
 from groundstation.flight.params import FlightParams
 from groundstation.flight.prepare import trajectory_for_flight
 from groundstation.flight.supervisor import Observation, State, Supervisor
+from groundstation.flight.touchdown import TouchdownProbe
 from groundstation.model import inputs_from_sticks
 from groundstation.types import (
     Channel,
@@ -133,6 +134,8 @@ class FlightCore:
         self._automatic = False
         self._weight = quad.mass * quad.g  # [N]
         self._lift_fraction = 1.0  # last commanded lift / weight, for the landing check
+        self._touchdown = TouchdownProbe(params.supervisor.contact_accel_tolerance)
+        self._lift_cap: float | None = None  # the probe's cap on the lift / weight
         self._command_period = params.command_period_s
         self._next_command = -math.inf
         self._was_commanding = False
@@ -190,7 +193,13 @@ class FlightCore:
         """Advance the flight by one tick at monotonic time ``t`` [s]."""
         old = self.supervisor.state
         self._estimate = self.estimate_step(imu, poses, still=self.standing(old, poses))
-        state = self.supervisor.update(self._observe(t, vehicle, health, stop_requests))
+        obs = self._observe(t, vehicle, health, stop_requests)
+        state = self.supervisor.update(obs)
+        lim = self.supervisor.limits
+        self._lift_cap = self._touchdown.update(
+            t, state is State.LAND and obs.vicon_age_s > lim.vicon_loss_hold_s,
+            obs.height_above_ground_m < lim.landed_height_m, obs.specific_force_g,
+            self._lift_fraction)
         position = self._position()
         if state is not old:
             self._enter(state, old, t, position)
@@ -419,6 +428,10 @@ class FlightCore:
         preview = self.mission.preview(t, lead) if lead > 0.0 else None
         self._preview = preview
         output = self.controller.step(t, est, reference, preview)
+        if self._lift_cap is not None:  # a landing on the IMU alone feels for the floor
+            least_f_z = (1.0 - self._lift_cap) * self._weight
+            if output.f_z < least_f_z:
+                output = ControlOutput(omega=output.omega, f_z=least_f_z)
         self._lift_fraction = 1.0 - output.f_z / self._weight  # f_z = F_lift + m g, lift < 0
         sticks, _flags = to_sticks(output, self._stick_params)
         return sticks
