@@ -36,12 +36,12 @@ BYTECODE := env -u PYTHONDONTWRITEBYTECODE
 
 pytest: install
 	$(BYTECODE) $(BIN)/python -m compileall -q groundstation sim_device
-	$(BYTECODE) $(BIN)/pytest -q -n $(WORKERS) --dist loadgroup
+	$(BYTECODE) $(BIN)/pytest -q -n $(WORKERS) --dist loadgroup --no-loadscope-reorder
 
 # The type check and the lint run beside the tests: the real-time flights' worker, not the
 # CPU, sets how long the tests take, and mypy's 12 s fit in what it leaves idle
 test: install
-	$(MAKE) --no-print-directory -j3 --output-sync=line lint typecheck pytest
+	$(MAKE) --no-print-directory -j3 lint typecheck pytest
 
 # The edit-run loop: no real-time flight and no long simulation (under 90 s); `make test`
 # runs everything

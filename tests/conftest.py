@@ -131,10 +131,34 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
                 item.add_marker(pytest.mark.xdist_group(group))
         if item.get_closest_marker("xdist_group") is None and _shares_a_module_fixture(item):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
-    # The fleet's flights last (a stable sort: the order is otherwise kept): a group runs
-    # its tests in this order, so they end the real-time flights' lane, by when the
-    # grounded vehicles' shorter lane is done instead of waiting for the lock they take.
-    items.sort(key=lambda item: "fleet_alone" in item.fixturenames)  # type: ignore[attr-defined]
+    # The order xdist hands out the work in (make test: --no-loadscope-reorder). The
+    # real-time flights' lane is the longest (about 5.5 min, one flight after another),
+    # so it goes first, or it starts behind whatever the worker that takes it holds; then
+    # the grounded vehicles' lane, then the other modules, most tests first (xdist's own
+    # order). Within a lane the fleet's flights come last, so they end the real-time lane
+    # by when the grounded vehicles' shorter lane is done, instead of waiting for the lock
+    # they take. A stable sort: the order is otherwise kept.
+    scopes = [_scope(item) for item in items]
+    sizes = {scope: scopes.count(scope) for scope in set(scopes)}
+    lanes = list(GROUPS.values())
+    first = {scope: i for i, scope in reversed(list(enumerate(scopes)))}
+
+    def rank(pair: tuple[pytest.Item, str]) -> tuple[int, int, int, bool]:
+        item, scope = pair
+        lane = lanes.index(scope) if scope in lanes else len(lanes)
+        return (lane, -sizes[scope], first[scope],
+                "fleet_alone" in item.fixturenames)  # type: ignore[attr-defined]
+
+    items[:] = [item for item, _ in sorted(zip(items, scopes, strict=True), key=rank)]
+
+
+def _scope(item: pytest.Item) -> str:
+    """The unit xdist's --dist loadgroup gives one worker: the item's group, or its module
+    (or class) as --dist loadscope has it."""
+    group = item.get_closest_marker("xdist_group")
+    if group is not None:
+        return str(group.args[0] if group.args else group.kwargs.get("name", "default"))
+    return item.nodeid.rsplit("::", 1)[0]
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
