@@ -36,7 +36,7 @@ BYTECODE := env -u PYTHONDONTWRITEBYTECODE
 
 pytest: install
 	$(BYTECODE) $(BIN)/python -m compileall -q groundstation sim_device
-	$(BYTECODE) $(BIN)/pytest -q -n $(WORKERS) --dist loadgroup --no-loadscope-reorder
+	$(BYTECODE) $(BIN)/pytest -q -n $(WORKERS) --dist loadgroup --no-loadscope-reorder --durations=12
 
 # The type check and the lint run beside the tests: the real-time flights' worker, not the
 # CPU, sets how long the tests take, and mypy's 12 s fit in what it leaves idle

@@ -239,7 +239,7 @@ def test_two_sigterms(tmp_path: Path, apart_s: float, landed: bool) -> None:
 def test_a_failsafe_landing_exits_1_with_a_warning(tmp_path: Path) -> None:
     """Finding 5: a landing forced by Vicon loss printed 'normal end' and exited 0."""
     # Vicon goes at 6 s of the lab's clock: the vehicle is in the air by then (take-off
-    # starts ~1.2 s after the daemon, REALTIME_SETTLE_S, and reaches the hover ~3.5 s later
+    # starts ~1.2 s after the daemon, REALTIME_SETTLE_S, and reaches the hover ~2.5 s later
     # with REALTIME_MOVES' climb and the handover's blend; on a loaded machine it may still
     # be climbing, and a landing forced there is as much the finding's).
     cfg = lab_config(tmp_path, **{"sim.vicon.outages": [[6.0, 60.0]]})
