@@ -532,10 +532,13 @@ def test_real_time_flight_in_the_asctec_ll_dialect(tmp_path: Path) -> None:
     assert link["acks_missing"] <= 0.01 * link["acks"]
     assert 0.015 < link["ack_p50_ms"] / 1e3 < link["ack_p99_ms"] / 1e3 < 0.08
     assert link["in_line_share"] < 1.0 and link["out_line_share"] < 0.5
-    # the IMU came at the polled 100 Hz, each sample once (no repeats without a counter)
+    # the IMU came at the polled 100 Hz, each sample once (no repeats without a counter):
+    # the rate over the hover, not the median interval between receive times, which a
+    # loaded machine bunches (8.9994 ms once beside a busy loop, the rate still 100 Hz)
     tracking = rows["state"] == int(State.TRACK)
-    interval = np.diff(np.unique(rows["imu_t"][tracking]))
-    assert 0.009 < float(np.median(interval)) < 0.011
+    samples = np.unique(rows["imu_t"][tracking])
+    rate_hz = (len(samples) - 1) / float(samples[-1] - samples[0])
+    assert 90.0 < rate_hz < 110.0 and len(samples) > 150, (rate_hz, len(samples))
     assert np.all(rows["vehicle_flags"][tracking] & 0x01)  # applying our commands
     truth = np.load(tmp_path / "truth.npz")
     hovering = truth["ctrl_mask"] == 0xF
