@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import socket
 import subprocess
 import sys
 import tempfile
@@ -58,7 +57,7 @@ from groundstation.config import (  # noqa: E402
     dump_config,
     load_config,
 )
-from groundstation.endpoints import free_ports  # noqa: E402
+from groundstation.endpoints import free_udp_port  # noqa: E402
 from groundstation.flight.assembly import assemble  # noqa: E402
 from sim_device.realtime import SimDeviceProcess  # noqa: E402
 from sim_device.wire import WireRecord  # noqa: E402
@@ -73,10 +72,6 @@ def rss_mb() -> float:
         if line.startswith("VmRSS:"):
             return int(line.split()[1]) / 1024.0
     return float("nan")
-
-
-def free_udp_port() -> int:
-    return free_ports(1, socket.SOCK_DGRAM)[0]
 
 
 @dataclass

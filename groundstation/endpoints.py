@@ -166,8 +166,6 @@ def free_ports(count: int, kind: int = socket.SOCK_STREAM) -> list[int]:
     low = max(1024, high - FREE_PORT_SPAN)
     ports: list[int] = []
     for _ in range(100 * count):
-        if len(ports) == count:
-            return ports
         # not the random module: a test that seeds it would make every process draw alike
         port = secrets.randbelow(high - low) + low
         if (kind, port) in _issued or port in ports:
@@ -179,6 +177,12 @@ def free_ports(count: int, kind: int = socket.SOCK_STREAM) -> list[int]:
                 continue
         _issued.add((kind, port))
         ports.append(port)
-    if len(ports) == count:
-        return ports
+        if len(ports) == count:
+            return ports
     raise OSError(f"no {count} free loopback ports between {low} and {high - 1}")
+
+
+def free_udp_port() -> int:
+    """One loopback UDP port nothing is bound to now (:func:`free_ports`): a virtual lab's
+    Vicon stream."""
+    return free_ports(1, socket.SOCK_DGRAM)[0]

@@ -4,13 +4,11 @@ Test-only (not part of the package), imported like ``ekf_truth``."""
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 from groundstation.app.inprocess import FlightResult, fly_in_process
 from groundstation.app.recorder import FlightRecorder
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.endpoints import free_ports
 from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import State
 from groundstation.lab import Lab
@@ -35,12 +33,6 @@ swings of about 1 rad, for identification; min-jerk shaping makes it flyable."""
 
 META = {"supervisor_states": [s.name for s in State]}
 """What the daemon writes into every flight log's meta.json."""
-
-
-def free_udp_port() -> int:
-    """A UDP port nothing on loopback is bound to now (:func:`free_ports`: not one the
-    kernel may hand to a sender before the daemon binds it)."""
-    return free_ports(1, socket.SOCK_DGRAM)[0]
 
 
 def sim_config(**overrides: object) -> GroundStationConfig:

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from lab_helpers import free_udp_port, realtime_sim_config
+from lab_helpers import realtime_sim_config
 
 from groundstation.client import (
     BadRequest,
@@ -50,7 +50,7 @@ from groundstation.client import (
     OutsideVolume,
 )
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config
-from groundstation.endpoints import free_ports
+from groundstation.endpoints import free_ports, free_udp_port
 from sim_device.realtime import SimDeviceProcess
 
 REPO = Path(__file__).resolve().parents[1]

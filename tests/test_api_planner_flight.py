@@ -24,12 +24,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from lab_helpers import free_udp_port, realtime_sim_config
+from lab_helpers import realtime_sim_config
 
 from groundstation.app.daemon import FlightDaemon, FlightSummary
 from groundstation.asctec.keepalive import WATCHDOG_S
 from groundstation.client import Client, Infeasible
 from groundstation.config import apply_overrides, dump_config
+from groundstation.endpoints import free_udp_port
 from groundstation.flight.assembly import assemble
 from groundstation.flight.commander import MAX_MOTION_S
 from groundstation.flight.supervisor import Outcome, State

@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from lab_helpers import free_udp_port
 
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
+from groundstation.endpoints import free_udp_port
 from groundstation.model.sensors import (
     ACC_VARIANCE_TABLE_6_3,
     GYRO_VARIANCE_TABLE_6_3,

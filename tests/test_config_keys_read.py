@@ -24,7 +24,7 @@ from typing import Any
 
 import pytest
 import zmq.auth
-from lab_helpers import free_udp_port, realtime_sim_config
+from lab_helpers import realtime_sim_config
 from pydantic import BaseModel
 from typer.testing import CliRunner
 
@@ -38,6 +38,7 @@ from groundstation.config import (
     apply_overrides,
     dump_config,
 )
+from groundstation.endpoints import free_udp_port
 from groundstation.flight.assembly import assemble
 from groundstation.flight.core import FlightCore
 from groundstation.telemetry.requests import RequestServer

@@ -26,12 +26,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from lab_helpers import REPO, free_udp_port, realtime_sim_config
+from lab_helpers import REPO, realtime_sim_config
 
 from groundstation.app.daemon import FlightDaemon
 from groundstation.app.fly import EXIT_CODES, summary_lines
 from groundstation.app.recorder import LogLoss, read_flight
 from groundstation.config import apply_overrides, dump_config, validate_config
+from groundstation.endpoints import free_udp_port
 from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import Outcome, State
 from sim_device.realtime import SimDeviceProcess

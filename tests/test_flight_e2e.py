@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from lab_helpers import free_udp_port, realtime_sim_config
+from lab_helpers import realtime_sim_config
 from scipy.spatial.transform import Rotation
 from test_foxglove import _decode as decode
 from test_foxglove import _descriptors as descriptors
@@ -42,7 +42,7 @@ from groundstation.app.daemon import FlightDaemon, FlightSummary
 from groundstation.app.fly import fly_command
 from groundstation.app.recorder import read_flight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config
-from groundstation.endpoints import free_ports
+from groundstation.endpoints import free_ports, free_udp_port
 from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import State
 from groundstation.telemetry import foxglove as fx

@@ -31,13 +31,14 @@ from typing import Any
 
 import numpy as np
 import pytest
-from lab_helpers import free_udp_port, realtime_sim_config
+from lab_helpers import realtime_sim_config
 from structlog.testing import capture_logs
 
 from groundstation.app.daemon import FlightDaemon
 from groundstation.app.fly import fly_command
 from groundstation.app.recorder import read_flight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config
+from groundstation.endpoints import free_udp_port
 from groundstation.flight.assembly import assemble
 from groundstation.flight.supervisor import State
 from sim_device.realtime import SimDeviceProcess, SimDeviceThread

@@ -37,11 +37,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from lab_helpers import fly_logged, free_udp_port, sim_config
+from lab_helpers import fly_logged, sim_config
 from scipy.optimize import brentq
 
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config, load_config
-from groundstation.endpoints import free_ports
+from groundstation.endpoints import free_ports, free_udp_port
 from sim_device.lab import VirtualLab
 from sim_device.realtime import SimDeviceProcess
 

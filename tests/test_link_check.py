@@ -22,11 +22,12 @@ from typing import Any
 import numpy as np
 import pytest
 import serial
-from lab_helpers import free_udp_port, sim_config
+from lab_helpers import sim_config
 from typer.testing import CliRunner
 
 from groundstation.cli import app
 from groundstation.config import dump_config
+from groundstation.endpoints import free_udp_port
 from sim_device.realtime import SimDeviceProcess
 
 GS = Path(sys.executable).parent / "gs"

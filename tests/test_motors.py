@@ -14,10 +14,10 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from lab_helpers import free_udp_port
 
 from groundstation.asctec.ll_link import LlLink
 from groundstation.config import apply_overrides, dump_config, load_config
+from groundstation.endpoints import free_udp_port
 from groundstation.flight.assembly import link_params
 from sim_device.realtime import SimDeviceProcess
 

@@ -19,7 +19,6 @@ the "simulation" curve of thesis Fig. 11.4.
 
 from __future__ import annotations
 
-import socket
 import time
 from collections.abc import Sequence
 from contextlib import ExitStack
@@ -32,7 +31,7 @@ from groundstation.app.inprocess import InProcessFlight
 from groundstation.config import GroundStationConfig, apply_overrides, dump_config
 from groundstation.control.factory import make_controller
 from groundstation.control.simulate import SimPlant, SimResult, simulate
-from groundstation.endpoints import free_ports
+from groundstation.endpoints import free_udp_port
 from groundstation.errors import GroundStationError
 from groundstation.evaluation.record import FlightRecord, record_from_log, record_from_trace
 from groundstation.flight.assembly import assemble
@@ -88,12 +87,6 @@ def run_in_process(scenario: Scenario, base: GroundStationConfig) -> FlightRecor
     result = flight.run(max_time_s=scenario.duration_s + MARGIN_S)
     return record_from_trace(result, np.array(probe.compute), np.array(probe.vicon),
                              np.array(probe.ref_yaw))
-
-
-def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that nothing is bound to now
-    (:func:`groundstation.endpoints.free_ports`)."""
-    return free_ports(1, socket.SOCK_DGRAM)[0]
 
 
 def build_daemon(scenario: Scenario, cfg: GroundStationConfig) -> FlightDaemon:
