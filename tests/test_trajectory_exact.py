@@ -283,3 +283,35 @@ def test_a_refusal_never_calls_a_point_inside_the_box_outside() -> None:
             assert re.search(r"[xyz] cannot be shown inside vol_[xyz] .*the worst sample, "
                              r"-?\d+\.\d\d m, is inside; the proven bound between samples "
                              r"reaches -?\d+\.\d\d m", line), line
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_one_sample_is_numpys_polynomial_and_its_derivatives(periodic: bool) -> None:
+    """A single sample (the flight's reference every tick) against numpy's own polynomial
+    evaluation of each segment and its derivatives; laps add the period and the heading."""
+    rng = np.random.default_rng(7)
+    breaks = np.cumsum(np.r_[0.0, rng.uniform(0.3, 2.0, 4)])
+    coef = rng.normal(size=(4, 8, 4))
+    if periodic:  # close the path: the last segment ends where the first starts
+        h = breaks[-1] - breaks[-2]
+        end = np.polynomial.polynomial.polyval(h, coef[-1])
+        coef[-1, 0, :3] -= end[:3] - coef[0, 0, :3]
+    path = PiecewisePolynomial(breaks, coef, periodic=periodic)
+    lap_yaw = (np.polynomial.polynomial.polyval(breaks[-1] - breaks[-2], coef[-1, :, 3])
+               - coef[0, 0, 3])
+    span = 2.5 * breaks[-1] if periodic else breaks[-1]
+    for t in rng.uniform(0.0, span, 300):
+        laps = math.floor(t / breaks[-1]) if periodic else 0
+        local = t - laps * breaks[-1]
+        i = int(np.searchsorted(breaks, local, side="right")) - 1
+        tau = local - breaks[i]
+        want = [np.array([np.polynomial.polynomial.polyval(
+            tau, np.polynomial.polynomial.polyder(coef[i, :, axis], r) if r else coef[i, :, axis])
+            for axis in range(4)]) for r in range(4)]
+        ref = path.sample(float(t))
+        for got, exact in ((ref.position, want[0][:3]), (ref.velocity, want[1][:3]),
+                           (ref.acceleration, want[2][:3]), (ref.jerk, want[3][:3])):
+            np.testing.assert_allclose(got, exact, rtol=1e-12, atol=1e-9)
+        assert ref.yaw == pytest.approx(want[0][3] + laps * lap_yaw, rel=1e-12, abs=1e-9)
+        assert ref.yaw_rate == pytest.approx(want[1][3], rel=1e-12, abs=1e-9)
+        assert ref.t == pytest.approx(t, abs=1e-9)

@@ -192,12 +192,29 @@ class PolySet:
         self.coef = np.asarray(coef, dtype=float)
         self.kind = kind
         self._d = [derivative_coefficients(self.coef, r) for r in range(4)]
+        # One sample is a product of the powers of tau with every derivative's
+        # coefficients at once (:meth:`at`): (m, K + 1, 4 derivatives x 4 axes).
+        k1 = self.coef.shape[1]
+        table = np.zeros((self.coef.shape[0], k1, 4, 4))
+        for r, d in enumerate(self._d):
+            table[:, :d.shape[1], r, :] = d
+        self._table = table.reshape(self.coef.shape[0], k1, 16)
+        self._exponents = np.arange(k1, dtype=float)
 
     def evaluate(self, index: IntArray, t: FloatArray) -> Samples:
         """Segment ``index[k]`` at ``t[k]`` with its exact derivatives up to the jerk."""
         tau = t - self.start[index]
         p, v, a, j = (horner(d[index], tau) for d in self._d)
         return Samples(t.copy(), p[:, :3], v[:, :3], a[:, :3], j[:, :3], p[:, 3], v[:, 3])
+
+    def at(self, index: int, t: float) -> Reference:
+        """Segment ``index`` at one time ``t`` [s]: :meth:`evaluate` for a single sample,
+        without its arrays of one (the flight's reference, every tick)."""
+        tau = t - float(self.start[index])
+        out = (tau ** self._exponents @ self._table[index]).reshape(4, 4)
+        return Reference(t=t, position=out[0, :3], velocity=out[1, :3],
+                         acceleration=out[2, :3], yaw=float(out[0, 3]), jerk=out[3, :3],
+                         yaw_rate=float(out[1, 3]))
 
     def bounds(self) -> PieceBounds:
         """From the Taylor expansion about each segment's middle: on ``|tau - mid| <= h/2``

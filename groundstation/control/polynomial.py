@@ -13,6 +13,7 @@ eases it in and out); a periodic one repeats, its heading continuing lap after l
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
@@ -55,6 +56,7 @@ class PiecewisePolynomial:
         self.coefficients: FloatArray = c
         self.duration = float(b[-1])
         self._set = PolySet(b[:-1], b[1:], c)
+        self._break_list = b.tolist()
         first = self._set.evaluate(np.array([0]), np.array([0.0]))
         last = self._set.evaluate(np.array([b.size - 2]), np.array([self.duration]))
         self._first, self._last = first.reference(0), last.reference(0)
@@ -82,9 +84,8 @@ class PiecewisePolynomial:
             end = self._first if t < 0.0 else self._last
             return Reference(t=t, position=end.position.copy(), velocity=np.zeros(3),
                              yaw=end.yaw)
-        i = min(int(np.searchsorted(self.breaks, t, side="right")) - 1, self.segments - 1)
-        s = self._set.evaluate(np.array([max(i, 0)]), np.array([t]))
-        ref = s.reference(0)
+        i = min(bisect.bisect_right(self._break_list, t) - 1, self.segments - 1)
+        ref = self._set.at(max(i, 0), t)
         if laps:
             return Reference(t=t + laps * self.duration, position=ref.position,
                              velocity=ref.velocity, acceleration=ref.acceleration,
