@@ -16,6 +16,7 @@ import pytest
 
 from groundstation.asctec.blocks import AxisCounts, StatusBlock
 from groundstation.asctec.decoder import RejectedFrame, StreamDecoder, encode_frame
+from groundstation.asctec.keepalive import GAP_WARNING_S
 from groundstation.asctec.link import ReceivedData, SerialLink
 from groundstation.asctec.messages import CommandMsg, ConfigMsg, DataMsg, Message
 from groundstation.errors import LinkError
@@ -199,9 +200,15 @@ def test_keepalive_keeps_commands_flowing_when_the_caller_is_silent(vehicle: Veh
     # gap reaches the vehicle's watchdog is proven on made-up times (test_asctec_keepalive
     # .py): this test runs beside other work, whose load delays a wake-up by tens of
     # milliseconds and more (55 ms seen here, 125 ms in a pty test beside three busy test
-    # workers), so here the largest gap is only counted, as the link counts it.
-    assert min(gaps) >= 1 / rate - 1e-3
-    assert float(np.median(gaps)) == pytest.approx(1 / rate, abs=0.005)
+    # workers), so here the largest gap is only counted, as the link counts it. Each
+    # deadline is a period after the last write, so a late wake-up moves the median too
+    # (27.8 ms for a 20 ms period in a make test whose four workers kept both cores busy):
+    # it says the writer is not systematically late, under the link's own gap warning
+    # (half the watchdog), as the dialect-neutral link test has it. The period itself is
+    # in the smallest gap: one wake-up of the fourteen on time is enough to show it, and
+    # a writer on a longer period has no gap below it.
+    assert 1 / rate - 1e-3 <= min(gaps) < 1.5 / rate, gaps
+    assert float(np.median(gaps)) < GAP_WARNING_S, gaps
     assert stats.max_command_gap == max(gaps)
 
 
