@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.polynomial.polynomial as npoly
@@ -188,6 +189,62 @@ def test_a_corner_file_in_degrees(tmp_path: Path) -> None:
     np.testing.assert_allclose(np.degrees(raw.yaws), [170, 190, 90], atol=1e-9)
 
 
+# ------------------------------------------------------------------ tables of other tools
+KNOTS = np.array([[0.0, 0.1, -0.2, -1.0, 170.0],  # t, north, east, down, heading [deg]
+                  [2.5, 0.625, 0.3125, -1.25, -175.5],
+                  [5.0, -0.4, 0.75, -1.5, -90.0],
+                  [7.5, 0.0, 0.0, -1.0, 12.25]])
+
+
+def _savetxt_spaces(path: Path) -> None:  # numpy's default: spaces, %.18e, no header
+    np.savetxt(path, np.c_[KNOTS[:, :4], np.radians(KNOTS[:, 4])])
+
+
+def _savetxt_tabs_named_in_a_comment(path: Path) -> None:  # the header as numpy writes it
+    np.savetxt(path, KNOTS, delimiter="\t", header="t\tx\ty\tz\tyaw_deg")
+
+
+def _matlab_save_ascii(path: Path) -> None:  # MATLAB's save -ascii: "%16.7e" per value
+    rows = np.c_[KNOTS[:, :4], np.radians(KNOTS[:, 4])]
+    path.write_text("".join("".join(f"{v:16.7e}" for v in row) + "\n" for row in rows))
+
+
+def _spreadsheet_with_decimal_commas(path: Path) -> None:
+    """A spreadsheet's CSV where the decimal mark is a comma: semicolons, CRLF, a byte-order
+    mark, and the empty rows it pads the export with."""
+    lines = ["t;x;y;z;yaw_deg"] + [";".join(f"{v:g}".replace(".", ",") for v in row)
+                                   for row in KNOTS] + [";;;;", ";;;;"]
+    path.write_bytes(("\ufeff" + "\r\n".join(lines) + "\r\n").encode("utf-8"))
+
+
+@pytest.mark.parametrize("write", [_savetxt_spaces, _savetxt_tabs_named_in_a_comment,
+                                   _matlab_save_ascii, _spreadsheet_with_decimal_commas])
+def test_a_waypoint_table_is_read_whatever_wrote_it(tmp_path: Path, write: Any) -> None:
+    """The same four waypoints written by numpy (spaces; tabs with the header as a
+    comment), MATLAB's ``save -ascii`` and a spreadsheet that writes decimal commas: the
+    same times, points and headings (within the writer's precision; 8 digits for MATLAB)."""
+    path = tmp_path / "knots.txt"
+    write(path)
+    raw = load_waypoints(path)
+    np.testing.assert_allclose(raw.times, KNOTS[:, 0], atol=1e-6)
+    np.testing.assert_allclose(raw.points, KNOTS[:, 1:4], atol=1e-6)
+    # unwrapped: 170 -> -175.5 deg is 14.5 deg on, not 345.5 back
+    np.testing.assert_allclose(np.degrees(raw.yaws), [170.0, 184.5, 270.0, 372.25], atol=1e-5)
+
+
+def test_a_table_that_is_not_numbers_is_refused_naming_the_line(tmp_path: Path) -> None:
+    path = tmp_path / "bad.csv"
+    path.write_text("t;x;y;z\n0;0;0;-1\n1;0,1,5;0;-1\n")  # two commas: no decimal comma
+    with pytest.raises(TrajectoryError, match=r"bad\.csv:3: not a number"):
+        load_waypoints(path)
+    path.write_text("0 0 0 -1\n1 0,5 0 -1\n")  # a decimal comma in a comma-free table
+    with pytest.raises(TrajectoryError, match=r"bad\.csv:2: not a number"):
+        load_waypoints(path)
+    path.write_text("t x y z\n0 0 0 -1\n1 0.5 0\n")
+    with pytest.raises(TrajectoryError, match=r"bad\.csv:3: expected 4 or 5 finite values"):
+        load_waypoints(path)
+
+
 # ------------------------------------------------------------------ polynomial files
 def _poly_table(durations: list[float], coef: np.ndarray) -> str:
     """A uav_trajectories table: Duration, then x^0..x^7, y^.., z^.., yaw^.."""
@@ -275,6 +332,26 @@ def test_the_crazyflie_figure8_is_read_and_checked_exactly() -> None:
                                [0.2 + p[:, 0].max(), 0.1 - p[:, 1].min()], atol=1e-6)
     assert report.feasible and report.position_jumps == [] and report.velocity_jumps == []
     np.testing.assert_allclose(traj.sample(0.0).position, [0.2, 0.1, -1.3])
+
+
+def test_the_crazyflie_figure8_with_spaces_or_tabs_is_the_same_curve(tmp_path: Path) -> None:
+    """figure8.csv's table written again by numpy with spaces (and with tabs), its header
+    kept: the curve is numpy's evaluation of the coefficients, at the configured centre."""
+    header = (DATA / "figure8.csv").read_text().splitlines()[0].split(",")
+    table = np.loadtxt(DATA / "figure8.csv", delimiter=",", skiprows=1)
+    center = np.array([0.2, 0.1, -1.3])
+    p, _, _ = _figure8_by_numpy(n=201)
+    t = np.linspace(0.0, float(table[:, 0].sum()), 201)
+    for delimiter in (" ", "\t"):
+        path = tmp_path / "figure8.txt"
+        np.savetxt(path, table, delimiter=delimiter, header=delimiter.join(header),
+                   comments="")
+        traj = load_trajectory_file(path, center=center, relative=True)
+        assert isinstance(traj, PiecewisePolynomial)
+        got = np.array([traj.sample(float(x)).position for x in t])
+        np.testing.assert_allclose(got[:, 0], center[0] + p[:, 0], atol=1e-9)
+        np.testing.assert_allclose(got[:, 1], center[1] - p[:, 1], atol=1e-9)
+        np.testing.assert_allclose(got[:, 2], center[2], atol=1e-9)
 
 
 def test_a_malformed_polynomial_file_is_refused_naming_the_line(tmp_path: Path) -> None:

@@ -1,7 +1,8 @@
 """Piecewise-polynomial trajectory files as Crazyswarm and uav_trajectories write them.
 
 The format (github.com/whoenig/uav_trajectories, read by Crazyswarm and the Crazyflie
-high-level commander): a CSV whose header is ``Duration,x^0,...,x^7,y^0,...,y^7,
+high-level commander): a CSV (or a table of another delimiter,
+:mod:`groundstation.control.table`) whose header is ``Duration,x^0,...,x^7,y^0,...,y^7,
 z^0,...,z^7,yaw^0,...,yaw^7``, one row per segment: its duration [s], then the
 coefficients of each axis, lowest power first, in the time since the segment's start
 (restarting at 0 in each segment). Positions are in metres in the Crazyflie's world
@@ -21,7 +22,6 @@ heading to the configuration (free, or ``trajectory.yaw_deg``).
 
 from __future__ import annotations
 
-import csv
 import math
 import re
 from pathlib import Path
@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from groundstation.control.polynomial import PiecewisePolynomial
+from groundstation.control.table import parse_number, read_table
 from groundstation.errors import TrajectoryError
 from groundstation.types import FloatArray
 
@@ -38,21 +39,14 @@ TO_NED = np.array([1.0, -1.0, -1.0, -1.0])
 """Crazyflie world (x forward, y left, z up, yaw counter-clockwise) to NED and heading."""
 
 
-def _first_row(text: str) -> list[str]:
-    for row in csv.reader(text.splitlines()):
-        if row and "".join(row).strip() and not row[0].lstrip().startswith("#"):
-            return row
-    return []
-
-
 def is_polynomial_file(path: str | Path) -> bool:
     """True when the file's first content line is a ``Duration,x^0,...`` header."""
     try:
         head = Path(path).read_text(encoding="utf-8", errors="replace")[:4096]
     except OSError:
         return False
-    row = _first_row(head)
-    return bool(row) and row[0].strip().lower() == "duration"
+    rows = read_table(head).rows
+    return bool(rows) and rows[0][1][0].strip().lower() == "duration"
 
 
 def load_polynomial_file(path: str | Path, *, origin: FloatArray | list[float] | None,
@@ -69,8 +63,8 @@ def load_polynomial_file(path: str | Path, *, origin: FloatArray | list[float] |
     except (OSError, UnicodeDecodeError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
         raise TrajectoryError(f"{path}: cannot read the polynomial file: {reason}") from exc
-    rows = [(n, r) for n, r in enumerate(csv.reader(text.splitlines()), start=1)
-            if r and "".join(r).strip() and not r[0].lstrip().startswith("#")]
+    table = read_table(text)
+    rows = table.rows
     if not rows:
         raise TrajectoryError(f"{path}: empty polynomial file")
     header_line, header = rows[0]
@@ -82,7 +76,7 @@ def load_polynomial_file(path: str | Path, *, origin: FloatArray | list[float] |
             raise TrajectoryError(f"{path}:{lineno}: {len(row)} columns, the header has "
                                   f"{len(header)}")
         try:
-            values = [float(cell) for cell in row]
+            values = [parse_number(cell, table.delimiter) for cell in row]
         except ValueError:
             raise TrajectoryError(f"{path}:{lineno}: not a number in {row!r:.80}") from None
         if not all(math.isfinite(v) for v in values):

@@ -12,7 +12,6 @@ absolute; a waypoint file's yaw column is absolute. These are the raw shapes;
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -24,6 +23,7 @@ import numpy as np
 from groundstation.control.excitation import identification_flight
 from groundstation.control.feasibility import FlightLimits, Volume
 from groundstation.control.polyfile import is_polynomial_file, load_polynomial_file
+from groundstation.control.table import parse_number, read_table
 from groundstation.control.trajectory import (
     FigureEight,
     Hover,
@@ -100,8 +100,11 @@ def load_waypoints(path: str | Path, *, smoothing_s: float = 0.0,
                    yaw: float | None = None) -> PiecewiseLinear:
     """Read a CSV of ``t, x, y, z[, yaw]`` rows (s, NED m, heading) into an open path.
 
-    A first content line that is not numeric is a header; blank lines and lines
-    starting with ``#`` are skipped. Times are taken relative to the first
+    Separated by commas, semicolons (decimal commas read), tabs or whitespace, as
+    spreadsheets and numpy write tables (:mod:`groundstation.control.table`). A first
+    content line that is not numeric is a header, and so is a comment line just before
+    the first row with as many names (numpy's ``savetxt(header=...)``); blank lines and
+    lines starting with ``#`` are skipped. Times are taken relative to the first
     row and must increase strictly; the path holds the last point at the end.
     A yaw column gives absolute headings (unwrapped: a step across +-pi is the
     short way) in radians, or in degrees when the header names the column ``yaw_deg``
@@ -132,20 +135,19 @@ def read_waypoint_rows(path: str | Path) -> list[list[float]]:
         raise TrajectoryError(f"{path}: cannot read waypoints: {exc.strerror}") from exc
     except UnicodeDecodeError:
         raise TrajectoryError(f"{path}: cannot read waypoints: not UTF-8 text") from None
+    table = read_table(text)
     rows: list[list[float]] = []
-    first = True
-    unit = 1.0
-    for lineno, row in enumerate(csv.reader(text.splitlines()), start=1):
-        if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
-            continue
-        header, first = first, False
+    named = table.comment_header  # numpy's savetxt(header=...): a header as a comment
+    width = len(table.rows[0][1]) if table.rows else 0
+    unit = yaw_unit(named) if named is not None and len(named) == width else 1.0
+    for index, (lineno, row) in enumerate(table.rows):
         try:
-            values = [float(cell) for cell in row]
+            values = [parse_number(cell, table.delimiter) for cell in row]
         except ValueError:
-            if header:
+            if index == 0:
                 unit = yaw_unit(row)
                 continue
-            raise TrajectoryError(f"{path}:{lineno}: not a number in {row!r}") from None
+            raise TrajectoryError(f"{path}:{lineno}: not a number in {row!r:.80}") from None
         if len(values) == 5:
             values[4] *= unit
         if len(values) not in (4, 5) or not all(math.isfinite(v) for v in values):
