@@ -72,12 +72,14 @@ def planted_lab(ground: GroundStationConfig, extra: dict[str, object]) -> Ground
     return apply_overrides(ground, {**IMU_PLANTED, **extra})
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def lab(request: pytest.FixtureRequest,
-        tmp_path: Path) -> Iterator[tuple[Path, GroundStationConfig]]:
-    """(the ground station's configuration file, the lab's configuration), lab running.
-    The IMU's planted values always; Vicon's for the Vicon test (its 16-fold attitude
-    noise would blur the attitude the accelerometer's zero is fitted to)."""
+        tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, GroundStationConfig]]:
+    """(the ground station's configuration file, the lab's configuration), lab running,
+    one per parameter for the tests that ask for it, each measuring in turn. The IMU's
+    planted values always; Vicon's for the Vicon test (its 16-fold attitude noise would
+    blur the attitude the accelerometer's zero is fitted to)."""
+    tmp_path = tmp_path_factory.mktemp(f"lab-{request.param}")
     ground = apply_overrides(load_config(ROOT / "config" / "sim.yaml"),
                              {"vicon.port": free_udp_port()})
     lab_cfg = planted_lab(ground, VICON_PLANTED if request.param == "vicon" else {})
@@ -118,10 +120,19 @@ def test_calibrate_imu_recovers_the_planted_zeros_and_noise(
         np.testing.assert_allclose(got[f"vehicle.{key}_variance"], var,
                                    rtol=z * np.sqrt(2 / (n - 1)))
     assert (tmp_path / "calibrate-imu.png").stat().st_size > 10_000
+
+
+@pytest.mark.virtual_vehicle
+@pytest.mark.slow
+@pytest.mark.parametrize("lab", ["imu"], indirect=True)
+def test_calibrate_imu_prints_what_to_paste(lab: tuple[Path, GroundStationConfig],
+                                            tmp_path: Path) -> None:
+    ground_file, _ = lab
     human = gs("calibrate", "imu", "--config", str(ground_file), "--seconds", "2",
                "--out", str(tmp_path))
-    assert human.returncode == 0
+    assert human.returncode == 0, human.stdout + human.stderr
     assert "paste into the configuration" in human.stdout and "gyro_zero:" in human.stdout
+    assert (tmp_path / "calibrate-imu.png").stat().st_size > 10_000
 
 
 @pytest.mark.virtual_vehicle
