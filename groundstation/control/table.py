@@ -49,16 +49,12 @@ class Table:
 def read_table(text: str) -> Table:
     """Split ``text`` into content rows (see the module doc). A text without content
     lines gives no rows."""
-    lines = text.splitlines()
+    lines = text.removeprefix("\ufeff").splitlines()  # the byte-order mark spreadsheets write
     first = next((ln for ln in lines if _is_content(ln)), "")
-    if first.startswith("\ufeff"):  # a byte-order mark, as spreadsheets write UTF-8
-        first = first[1:]
     delimiter = next((d for d in _DELIMITERS if d in first), None)
     rows: list[tuple[int, list[str]]] = []
     comment: str | None = None
     for lineno, line in enumerate(lines, start=1):
-        if lineno == 1 and line.startswith("\ufeff"):
-            line = line[1:]
         if not _is_content(line):
             if not rows and line.strip():
                 comment = line.strip().lstrip("#")
@@ -84,7 +80,7 @@ def parse_number(cell: str, delimiter: str | None) -> float:
 
 
 def _is_content(line: str) -> bool:
-    stripped = line.strip().lstrip("\ufeff")
+    stripped = line.strip()
     return bool(stripped) and not stripped.startswith("#")
 
 
